@@ -1,0 +1,40 @@
+# Two entry points: `make repro` (the whole pipeline on params.yaml) and `make test`.
+# Both create .venv first if it is missing or older than pyproject.toml.
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: env repro test clean-env
+
+env: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@# open3d dlopens libusb-1.0.so.0 (Debian package libusb-1.0-0).
+	@if ! ldconfig -p | grep -q 'libusb-1.0.so.0'; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "installing Debian package libusb-1.0-0 (needed by open3d)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null; \
+	  else \
+	    echo "ImportError: libusb-1.0.so.0 — open3d needs the Debian package libusb-1.0-0:" \
+	         "run 'sudo apt-get install libusb-1.0-0' and retry" >&2; exit 1; \
+	  fi; \
+	fi
+	@[ -x $(BIN)/python ] || $(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	@# torch first, pinned: the CPU wheel; unpinned it would pull CUDA packages.
+	$(BIN)/pip install -q torch==2.13.0
+	$(BIN)/pip install -q -e '.[dev]'
+	@touch $(STAMP)
+
+repro: $(STAMP)
+	@# stages run `python -m stages.<name>`: put the venv first on PATH.
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+
+clean-env:
+	rm -rf $(VENV)

@@ -1,0 +1,124 @@
+"""Typed, validated parameters (``params.yaml``).
+
+One pydantic model per params.yaml section. Unknown keys, missing keys, wrong types and
+out-of-range values fail at load time with a :class:`~skt_lib.errors.ParamsError` whose
+message names the offending key, e.g. ``mesh_gen.n_supports``.
+All lengths are metres.
+"""
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from skt_lib.errors import ParamsError
+
+LEVELS = ("easy", "normal", "hard", "very_hard")
+OBJECT_CATEGORIES = ("mug", "cooking_utensil", "scissor", "tool", "other")
+
+PositiveLength = Annotated[float, Field(gt=0.0, le=1.0)]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=False)
+
+
+def _check_range(name: str, rng: tuple[float, float]) -> None:
+    if rng[0] > rng[1]:
+        raise ValueError(f"{name}: lower bound {rng[0]} is above upper bound {rng[1]}")
+
+
+class CommonParams(_Section):
+    seed: int = Field(ge=0, description="The one seed every generator is derived from.")
+
+
+class ComputeParams(_Section):
+    backend: Literal["local", "dask"] = Field(
+        description="Per-item executor: local processes, or a Dask distributed cluster."
+    )
+    n_workers: int = Field(ge=1, le=256, description="Worker processes (local or LocalCluster).")
+    scheduler_address: str | None = Field(
+        default=None, description="Dask scheduler 'tcp://host:port'; null starts a LocalCluster."
+    )
+
+
+class MeshGenParams(_Section):
+    n_supports: int = Field(ge=4, le=5000, description="Supporting items to generate.")
+    n_val_per_level: int = Field(ge=0, description="Validation supports per difficulty level.")
+    n_test_per_level: int = Field(ge=1, description="Test supports per difficulty level.")
+    n_objects_per_category: int = Field(ge=1, le=100, description="Objects per category.")
+    support_radius_m: tuple[PositiveLength, PositiveLength] = Field(
+        description="Range of the support tube's section half-width (round radius / square half-side)."
+    )
+    object_rod_radius_m: PositiveLength = Field(
+        description="Every object's aperture admits a rod of at least this radius."
+    )
+    level_rise_m: tuple[PositiveLength, PositiveLength, PositiveLength] = Field(
+        description="Blocking-height thresholds between easy|normal|hard|very_hard."
+    )
+    narrow_gap_m: PositiveLength = Field(
+        description="Clearance above the hanging arm below which a support is one level harder."
+    )
+    curl_very_hard_deg: float = Field(
+        gt=90.0, lt=360.0, description="Total tip turning above which a hook is very_hard."
+    )
+    density_kg_m3: float = Field(gt=10.0, lt=20000.0, description="Object material density.")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "MeshGenParams":
+        _check_range("support_radius_m", self.support_radius_m)
+        if not self.level_rise_m[0] < self.level_rise_m[1] < self.level_rise_m[2]:
+            raise ValueError("level_rise_m: thresholds must increase strictly")
+        if self.support_radius_m[1] >= self.object_rod_radius_m:
+            raise ValueError(
+                "support_radius_m: the thickest support must be thinner than object_rod_radius_m"
+            )
+        n_fixed = 4 * (self.n_val_per_level + self.n_test_per_level)
+        if n_fixed >= self.n_supports:
+            raise ValueError(
+                f"n_supports: {self.n_supports} leaves no training supports after "
+                f"{n_fixed} val+test supports"
+            )
+        return self
+
+
+class Params(_Section):
+    common: CommonParams
+    compute: ComputeParams
+    mesh_gen: MeshGenParams
+
+
+def _format_error(source: str, err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        key = ".".join(str(p) for p in e["loc"]) or "<root>"
+        msg = e["msg"].removeprefix("Value error, ")
+        got = f" (got {e['input']!r})" if e["type"] != "missing" and "input" in e else ""
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key (misspelt?)"
+            got = ""
+        lines.append(f"{source}: {key}: {msg}{got}")
+    return "\n".join(lines)
+
+
+def parse_params(data: object, source: str = "params") -> Params:
+    """Validate a params mapping; raise :class:`ParamsError` naming every bad key."""
+    if not isinstance(data, dict):
+        raise ParamsError(f"{source}: expected a mapping of sections, got {type(data).__name__}")
+    try:
+        return Params.model_validate(data)
+    except ValidationError as err:
+        raise ParamsError(_format_error(source, err)) from None
+
+
+def load_params(path: str | Path = "params.yaml") -> Params:
+    """Read and validate ``params.yaml``."""
+    path = Path(path)
+    if not path.is_file():
+        raise ParamsError(f"{path}: params file not found")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as err:
+        raise ParamsError(f"{path}: not valid YAML: {err}") from None
+    return parse_params(data, str(path))

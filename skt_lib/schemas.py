@@ -1,0 +1,50 @@
+"""Parquet schemas of every table, defined once (documented key by key in README.md)."""
+
+import pyarrow as pa
+
+from skt_lib.io import TableSchema
+
+_VEC3 = pa.list_(pa.float64(), 3)
+
+SUPPORTS = TableSchema(
+    "supports",
+    1,
+    {
+        "support_id": pa.string(),
+        "family": pa.string(),
+        "difficulty": pa.string(),
+        "split": pa.string(),
+        "section": pa.string(),
+        "radius_m": pa.float64(),
+        "blocking_height_m": pa.float64(),
+        "clearance_above_m": pa.float64(),
+        "tip_turn_deg": pa.float64(),
+        "hang_point": _VEC3,
+        "n_parts": pa.int32(),
+        "volume_m3": pa.float64(),
+        "part_iou": pa.float64(),
+        "mesh_path": pa.string(),
+        "collision_path": pa.string(),
+        "urdf_path": pa.string(),
+    },
+)
+
+OBJECTS = TableSchema(
+    "objects",
+    1,
+    {
+        "object_id": pa.string(),
+        "category": pa.string(),
+        "aperture": pa.string(),
+        "is_reference": pa.bool_(),
+        "aperture_clearance_m": pa.float64(),
+        "rod_radius_m": pa.float64(),
+        "n_parts": pa.int32(),
+        "volume_m3": pa.float64(),
+        "mass_kg": pa.float64(),
+        "part_iou": pa.float64(),
+        "mesh_path": pa.string(),
+        "collision_path": pa.string(),
+        "urdf_path": pa.string(),
+    },
+)

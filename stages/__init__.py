@@ -1,0 +1,1 @@
+"""DVC stages: thin scripts that call skt_lib, log to Rerun and write reports."""

@@ -1,0 +1,126 @@
+"""mesh_gen — procedural supporting items and hangable objects (replaces Point-E).
+
+Inputs:  params.yaml sections common, compute, mesh_gen.
+Outputs: data/mesh_gen/supports.parquet, objects.parquet, supports/<id>/, objects/<id>/
+         (visual.obj, collision.obj, <id>.urdf), mesh_gen.rrd;
+         reports/mesh_gen/metrics.json, report.md, gallery PNGs.
+"""
+
+import logging
+import shutil
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+from skt_lib.config import LEVELS, OBJECT_CATEGORIES, load_params
+from skt_lib.geometry.build import OBJECT_RGBA, SUPPORT_RGBA, ObjectTask, SupportTask, build_object, build_support
+from skt_lib.geometry.export import read_obj
+from skt_lib.geometry.splits import assign_splits
+from skt_lib.io import write_table
+from skt_lib.schemas import OBJECTS, SUPPORTS
+from stages._common import parse_args, run_items
+from viz.figures import bar_chart, mesh_gallery
+from viz.report import Report, write_metrics
+from viz.rerun_log import log_mesh, object_path, recording, support_path
+
+log = logging.getLogger("mesh_gen")
+GALLERY_PER_GROUP = 8
+
+
+def main(argv=None) -> int:
+    args = parse_args("mesh_gen", argv)
+    params = load_params(args.params)
+    p, seed = params.mesh_gen, params.common.seed
+    out, rep = Path(args.data_dir), Path(args.reports_dir)
+    for sub in ("supports", "objects"):
+        shutil.rmtree(out / sub, ignore_errors=True)
+
+    t0 = time.perf_counter()
+    tasks = [SupportTask(seed, i, p, str(out)) for i in range(p.n_supports)]
+    supports, s_fail, s_failed = run_items(build_support, tasks, params.compute, "supports")
+    t_sup = time.perf_counter() - t0
+    otasks = [ObjectTask(seed, "reference", 0, p, str(out))]
+    otasks += [ObjectTask(seed, c, k, p, str(out)) for c in OBJECT_CATEGORIES
+               for k in range(p.n_objects_per_category)]
+    objects, o_fail, o_failed = run_items(build_object, otasks, params.compute, "objects")
+    t_obj = time.perf_counter() - t0 - t_sup
+    if not any(o["is_reference"] for o in objects):
+        log.error("the reference object failed: %s", o_failed)
+        return 1
+
+    splits = assign_splits([s["support_id"] for s in supports], [s["difficulty"] for s in supports],
+                           seed, p.n_val_per_level, p.n_test_per_level)
+    for s, split in zip(supports, splits):
+        s["split"] = split
+    write_table(out / "supports.parquet", supports, SUPPORTS)
+    write_table(out / "objects.parquet", objects, OBJECTS)
+
+    by_level = Counter(s["difficulty"] for s in supports)
+    test_level = Counter(s["difficulty"] for s in supports if s["split"] == "test")
+    real = [o for o in objects if not o["is_reference"]]
+    metrics = {
+        "n_supports": len(supports),
+        "n_objects": len(real),
+        "supports_by_difficulty": {lv: by_level[lv] for lv in LEVELS},
+        "test_supports_by_difficulty": {lv: test_level[lv] for lv in LEVELS},
+        "supports_by_split": dict(sorted(Counter(splits).items())),
+        "supports_by_family": dict(sorted(Counter(s["family"] for s in supports).items())),
+        "objects_by_category": {c: sum(o["category"] == c for o in real) for c in OBJECT_CATEGORIES},
+        "n_invalid": len(s_failed) + len(o_failed),
+        "failures_by_reason": dict(sorted((s_fail + o_fail).items())),
+        "min_part_iou": min(r["part_iou"] for r in supports + objects),
+        "min_aperture_clearance_m": min(o["aperture_clearance_m"] for o in objects),
+    }
+    write_metrics(rep, metrics)
+
+    meshes = {r.get("support_id", r.get("object_id")): read_obj(out / r["mesh_path"])[0]
+              for r in supports + objects}
+    with recording("mesh_gen", out / "mesh_gen.rrd", "mesh_gen: supports and objects") as rec:
+        for s in supports:
+            m, row = meshes[s["support_id"]], LEVELS.index(s["difficulty"])
+            col = sum(1 for q in supports[: supports.index(s)] if q["difficulty"] == s["difficulty"])
+            log_mesh(rec, support_path(s["support_id"]), m.vertices, m.faces, SUPPORT_RGBA,
+                     (0.25 * row, 0.25 * col, 0.0), family=s["family"],
+                     difficulty=s["difficulty"], split=s["split"])
+        for k, o in enumerate(objects):
+            m = meshes[o["object_id"]]
+            log_mesh(rec, object_path(o["object_id"]), m.vertices, m.faces,
+                     OBJECT_RGBA[o["category"]], (-0.4, 0.2 * k, 0.0), category=o["category"],
+                     aperture=o["aperture"])
+
+    report = Report("mesh_gen", rep)
+    report.text(f"Seed {seed}; {len(supports)} supports and {len(real)} objects (+ the reference "
+                f"object) on {params.compute.n_workers} {params.compute.backend} worker(s).")
+    report.heading("Time")
+    report.table(["what", "wall s", "s per item"],
+                 [["supports", t_sup, t_sup / max(1, len(tasks))],
+                  ["objects", t_obj, t_obj / max(1, len(otasks))]])
+    report.heading("Counts")
+    report.table(["level", "all", "test"], [[lv, by_level[lv], test_level[lv]] for lv in LEVELS])
+    report.table(["split", "supports"], [[k, v] for k, v in metrics["supports_by_split"].items()])
+    fam = {lv: Counter(s["family"] for s in supports if s["difficulty"] == lv) for lv in LEVELS}
+    bar_chart(fam, report.figure("families_by_level.png", "Families per difficulty level"),
+              "supports per family and level")
+    report.heading("Failures")
+    report.text("None." if not (s_failed or o_failed) else "\n".join(
+        f"- `{getattr(t, 'support_id', getattr(t, 'object_id', '?'))}`: {f.reason} — {f.message}"
+        for t, f in s_failed + o_failed))
+    report.heading("Galleries")
+    for lv in LEVELS:
+        items = [(f"{s['support_id']} {s['family']}\nh={s['blocking_height_m'] * 100:.1f} cm",
+                  meshes[s["support_id"]].vertices, meshes[s["support_id"]].faces, SUPPORT_RGBA)
+                 for s in supports if s["difficulty"] == lv][:GALLERY_PER_GROUP]
+        mesh_gallery(items, report.figure(f"gallery_{lv}.png", f"{lv} supports (h: blocking height)"))
+    for c in (*OBJECT_CATEGORIES, "reference"):
+        items = [(o["object_id"], meshes[o["object_id"]].vertices, meshes[o["object_id"]].faces,
+                  OBJECT_RGBA[c]) for o in objects if o["category"] == c][:GALLERY_PER_GROUP]
+        mesh_gallery(items, report.figure(f"objects_{c}.png", f"{c} objects"), elev=10, azim=-20)
+    report.write()
+    log.info("wrote %d supports, %d objects, %d invalid", len(supports), len(objects),
+             metrics["n_invalid"])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

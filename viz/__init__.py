@@ -1,0 +1,1 @@
+"""Drawing only: Rerun recordings, report markdown and PNG figures. Computes nothing."""

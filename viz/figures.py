@@ -1,0 +1,61 @@
+"""PNG figures for reports (matplotlib, Agg backend)."""
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
+
+from skt_lib.io import atomic_path  # noqa: E402
+
+_LIGHT = np.array([0.4, -0.6, 0.7]) / np.linalg.norm([0.4, -0.6, 0.7])
+
+
+def save(fig, path: str | Path) -> None:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=90, metadata={"Software": None})
+    plt.close(fig)
+
+
+def mesh_gallery(items: list[tuple[str, np.ndarray, np.ndarray, tuple]], path: str | Path,
+                 ncols: int = 4, elev: float = 12.0, azim: float = -70.0) -> None:
+    """Shaded 3D views of meshes: items are (title, vertices (V,3), faces (F,3), rgba)."""
+    nrows = max(1, -(-len(items) // ncols))
+    fig = plt.figure(figsize=(3.0 * ncols, 3.0 * nrows))
+    for k, (title, v, f, rgba) in enumerate(items):
+        ax = fig.add_subplot(nrows, ncols, k + 1, projection="3d")
+        tri = v[f]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-12
+        shade = 0.35 + 0.65 * np.clip(normal @ _LIGHT, 0, 1)
+        colors = np.clip(np.outer(shade, rgba[:3]), 0, 1)
+        ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolors="none"))
+        lo, hi = v.min(0), v.max(0)
+        c, half = (lo + hi) / 2, (hi - lo).max() / 2 + 1e-3
+        ax.set(xlim=(c[0] - half, c[0] + half), ylim=(c[1] - half, c[1] + half),
+               zlim=(c[2] - half, c[2] + half))
+        ax.set_box_aspect((1, 1, 1))
+        ax.view_init(elev=elev, azim=azim)
+        ax.set_axis_off()
+        ax.set_title(title, fontsize=8)
+    fig.tight_layout()
+    save(fig, path)
+
+
+def bar_chart(counts: dict[str, dict[str, int]], path: str | Path, title: str) -> None:
+    """Grouped bars: counts[group][key]."""
+    groups = list(counts)
+    keys = sorted({k for g in counts.values() for k in g})
+    fig, ax = plt.subplots(figsize=(max(5, 0.5 * len(keys) * len(groups)), 3.2))
+    width = 0.8 / max(1, len(groups))
+    x = np.arange(len(keys))
+    for i, g in enumerate(groups):
+        ax.bar(x + i * width, [counts[g].get(k, 0) for k in keys], width, label=g)
+    ax.set_xticks(x + width * (len(groups) - 1) / 2, keys, rotation=30, ha="right", fontsize=8)
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    save(fig, path)

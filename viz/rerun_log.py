@@ -1,0 +1,75 @@
+"""Rerun logging: one entity tree for every stage.
+
+    world/supports/<support_id>/mesh   support meshes (support frame)
+    world/supports/<support_id>/cloud  partial point clouds
+    world/supports/<support_id>/skt    semantic keypoint trajectories
+    world/objects/<object_id>/mesh     object meshes (object frame)
+    world/robot/...                    robot rollouts
+    plots/<metric>                     scalars
+
+Constant data is logged ``static=True``; each stage has its own timeline named after it.
+Recordings are written to a temporary file and renamed when complete.
+"""
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+APP_ID = "skt_hang"
+
+
+def support_path(support_id: str) -> str:
+    return f"world/supports/{support_id}"
+
+
+def object_path(object_id: str) -> str:
+    return f"world/objects/{object_id}"
+
+
+def default_blueprint(title: str) -> rrb.Blueprint:
+    return rrb.Blueprint(
+        rrb.Spatial3DView(origin="world", name=title),
+        collapse_panels=False,
+    )
+
+
+@contextmanager
+def recording(stage: str, path: str | Path, title: str) -> Iterator[rr.RecordingStream]:
+    """A recording saved to ``path`` (atomically, on success only) with the default blueprint."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    rec = rr.RecordingStream(APP_ID, recording_id=f"{APP_ID}-{stage}")
+    rec.save(str(tmp))
+    rec.send_blueprint(default_blueprint(title))
+    try:
+        yield rec
+        rec.flush()
+        rec.disconnect()
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def log_mesh(rec: rr.RecordingStream, entity: str, vertices: np.ndarray, faces: np.ndarray,
+             rgba, translation=(0.0, 0.0, 0.0), **properties: str) -> None:
+    """A static mesh at ``entity/mesh``, placed at ``translation`` (for galleries), with its
+    properties shown in the selection panel and as a label."""
+    rec.log(entity, rr.Transform3D(translation=translation), static=True)
+    rec.log(
+        f"{entity}/mesh",
+        rr.Mesh3D(vertex_positions=vertices.astype(np.float32),
+                  triangle_indices=faces.astype(np.uint32), albedo_factor=list(rgba)),
+        static=True,
+    )
+    if properties:
+        rec.log(entity, rr.AnyValues(**properties), static=True)
+        label = " ".join([entity.rsplit("/", 1)[-1], *properties.values()])
+        top = [float(vertices[:, 0].mean()), 0.0, float(vertices[:, 2].max()) + 0.02]
+        rec.log(f"{entity}/label", rr.Points3D([top], labels=[label], radii=0.001), static=True)
