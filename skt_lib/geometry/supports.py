@@ -94,7 +94,7 @@ class _Path:
 # Each takes (rng, r, square, rise, p) and returns a SupportShape; ``rise`` is the blocking
 # height the sampler aims for (the measured value decides the level).
 
-_WALL = (PLATE_THICKNESS_M / 2, 0.0, 0.0)
+_WALL = (PLATE_THICKNESS_M, 0.0, 0.0)  # strokes start on the plate's front face
 
 
 def _u(rng, lo, hi) -> float:
@@ -250,19 +250,24 @@ def measure_difficulty(shape: SupportShape, p: MeshGenParams) -> Difficulty:
     cand = np.flatnonzero(pts[:, 0] >= HANG_MIN_X_M)
     if len(cand) == 0:
         raise GenerationFailed("arm never reaches the hang region", "no_hang_region")
-    zmin = z_top[cand].min()
-    i = int(cand[z_top[cand] <= zmin + 1e-3].max())
+    # Lowest point of the arm; on a flat stretch the object slides nowhere, so take the far
+    # end of that stretch (where a J/L bend starts), not its wall end.
+    i = int(cand[np.argmin(z_top[cand])])
+    zmin = z_top[i]
+    while i + 1 < len(seg) and z_top[i + 1] <= zmin + 1e-4 and abs(seg[i][2]) < 0.035 * np.linalg.norm(seg[i]):
+        i += 1
     if i == len(pts) - 1:
         raise GenerationFailed("hang point at the very tip: objects would slide off", "slides_off")
     c = pts[i]
-    t = seg[i] / np.linalg.norm(seg[i])
+    t = seg[i - 1] if i > 0 else seg[i]  # arriving direction: the arm's, at a bend
+    t = t / np.linalg.norm(t)
     n = np.array([-t[2], 0.0, t[0]])
     n /= np.linalg.norm(n)
     heights = [float(((pts[i + 1 :] - c) @ n).max())]
     heights += [float((np.asarray(k) - c) @ n) + rk - arm.radius for k, rk in shape.knobs]
     blocking = max(0.0, *heights)
 
-    dirs = seg[i:] / np.linalg.norm(seg[i:], axis=1, keepdims=True)
+    dirs = np.vstack([t, seg[i:] / np.linalg.norm(seg[i:], axis=1, keepdims=True)])
     turn = float(np.degrees(np.arccos(np.clip((dirs[:-1] * dirs[1:]).sum(1), -1, 1))).sum())
 
     others = [(pts[(s < s[i] - 0.025)], arm.radius)]

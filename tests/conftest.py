@@ -1,0 +1,45 @@
+"""Shared fixtures, built in code: no network, no files outside tmp_path."""
+
+import pytest
+import yaml
+
+from skt_lib.config import parse_params
+
+TINY = {
+    "common": {"seed": 7},
+    "compute": {"backend": "local", "n_workers": 1, "scheduler_address": None},
+    "mesh_gen": {
+        "n_supports": 12,
+        "n_val_per_level": 0,
+        "n_test_per_level": 1,
+        "n_objects_per_category": 1,
+        "support_radius_m": [0.003, 0.006],
+        "object_rod_radius_m": 0.01,
+        "level_rise_m": [0.006, 0.02, 0.04],
+        "narrow_gap_m": 0.04,
+        "curl_very_hard_deg": 200.0,
+        "density_kg_m3": 700.0,
+    },
+}
+
+
+@pytest.fixture
+def tiny_dict():
+    import copy
+
+    return copy.deepcopy(TINY)
+
+
+@pytest.fixture
+def tiny_params(tiny_dict):
+    return parse_params(tiny_dict)
+
+
+@pytest.fixture
+def write_params(tmp_path):
+    def _write(data, name="params.yaml"):
+        path = tmp_path / name
+        path.write_text(yaml.safe_dump(data))
+        return path
+
+    return _write
