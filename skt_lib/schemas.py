@@ -20,6 +20,8 @@ SUPPORTS = TableSchema(
         "clearance_above_m": pa.float64(),
         "tip_turn_deg": pa.float64(),
         "hang_point": _VEC3,
+        "hang_tangent": _VEC3,
+        "arm_centreline": pa.list_(_VEC3),
         "n_parts": pa.int32(),
         "volume_m3": pa.float64(),
         "part_iou": pa.float64(),
@@ -46,5 +48,43 @@ OBJECTS = TableSchema(
         "mesh_path": pa.string(),
         "collision_path": pa.string(),
         "urdf_path": pa.string(),
+    },
+)
+
+_VEC4 = pa.list_(pa.float64(), 4)
+
+CONTACTS = TableSchema(
+    "contacts",
+    1,
+    {
+        "item_id": pa.string(),
+        "kind": pa.string(),
+        "object_id": pa.string(),
+        "support_id": pa.string(),
+        "ok": pa.bool_(),
+        "failure_reason": pa.string(),
+        "n_attempts": pa.int32(),
+        "n_success": pa.int32(),
+        "n_consistent": pa.int32(),
+        "contact_support": _VEC3,
+        "contact_object": _VEC3,
+        "hang_position": _VEC3,
+        "hang_quat": _VEC4,
+        "goal_clearance_m": pa.float64(),
+    },
+)
+
+KEYPOINTS = TableSchema(
+    "keypoints",
+    1,
+    {
+        "object_id": pa.string(),
+        "category": pa.string(),
+        "is_reference": pa.bool_(),
+        "position": _VEC3,
+        "quat": _VEC4,
+        "rotation": pa.list_(pa.float64(), 9),
+        "p_hang": _VEC3,
+        "p_front": _VEC3,
     },
 )

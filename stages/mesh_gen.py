@@ -20,7 +20,7 @@ from skt_lib.geometry.splits import assign_splits
 from skt_lib.io import write_table
 from skt_lib.schemas import OBJECTS, SUPPORTS
 from stages._common import parse_args, run_items
-from viz.figures import bar_chart, mesh_gallery
+from viz.figures import Panel, bar_chart, mesh_gallery
 from viz.report import Report, write_metrics
 from viz.rerun_log import log_mesh, object_path, recording, support_path
 
@@ -108,13 +108,14 @@ def main(argv=None) -> int:
         for t, f in s_failed + o_failed))
     report.heading("Galleries")
     for lv in LEVELS:
-        items = [(f"{s['support_id']} {s['family']}\nh={s['blocking_height_m'] * 100:.1f} cm",
-                  meshes[s["support_id"]].vertices, meshes[s["support_id"]].faces, SUPPORT_RGBA)
+        items = [Panel(f"{s['support_id']} {s['family']}\nh={s['blocking_height_m'] * 100:.1f} cm",
+                       [(meshes[s["support_id"]].vertices, meshes[s["support_id"]].faces, SUPPORT_RGBA)])
                  for s in supports if s["difficulty"] == lv][:GALLERY_PER_GROUP]
         mesh_gallery(items, report.figure(f"gallery_{lv}.png", f"{lv} supports (h: blocking height)"))
     for c in (*OBJECT_CATEGORIES, "reference"):
-        items = [(o["object_id"], meshes[o["object_id"]].vertices, meshes[o["object_id"]].faces,
-                  OBJECT_RGBA[c]) for o in objects if o["category"] == c][:GALLERY_PER_GROUP]
+        items = [Panel(o["object_id"], [(meshes[o["object_id"]].vertices, meshes[o["object_id"]].faces,
+                                         OBJECT_RGBA[c])])
+                 for o in objects if o["category"] == c][:GALLERY_PER_GROUP]
         mesh_gallery(items, report.figure(f"objects_{c}.png", f"{c} objects"), elev=10, azim=-20)
     report.write()
     log.info("wrote %d supports, %d objects, %d invalid", len(supports), len(objects),

@@ -20,6 +20,8 @@ TINY = {
         "curl_very_hard_deg": 200.0,
         "density_kg_m3": 700.0,
     },
+    "contact_sim": {'dt': 0.004166666666666667, 'solver_iterations': 50, 'friction': 0.6, 'rod_radius_m': 0.005, 'n_drops': 3, 'drop_steps': 480, 'perturb': {'accel_m_s2': 2.0, 'steps_per_direction': 240, 'settle_steps': 480}, 'max_init_tries': 40, 'init_clearance_m': 0.001, 'pose_noise_deg': 6.0, 'roll_noise_deg': 15.0, 'slide_noise_m': 0.03, 'release_gap_m': 0.004, 'consistency_tol_m': 0.01, 'goal_clearance_m': 0.0005},
+    "rotation_extraction": {'front_offset_m': 0.05},
 }
 
 

@@ -1,5 +1,6 @@
 """PNG figures for reports (matplotlib, Agg backend)."""
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import matplotlib
@@ -20,27 +21,46 @@ def save(fig, path: str | Path) -> None:
     plt.close(fig)
 
 
-def mesh_gallery(items: list[tuple[str, np.ndarray, np.ndarray, tuple]], path: str | Path,
-                 ncols: int = 4, elev: float = 12.0, azim: float = -70.0) -> None:
-    """Shaded 3D views of meshes: items are (title, vertices (V,3), faces (F,3), rgba)."""
-    nrows = max(1, -(-len(items) // ncols))
+@dataclass
+class Panel:
+    """One picture: meshes ``(vertices (V, 3), faces (F, 3), rgba)`` and optional red
+    points ``(K, 3)`` and axis triads ``(origin (3,), rotation (3, 3))``, one frame."""
+
+    title: str
+    meshes: list = field(default_factory=list)
+    points: np.ndarray | None = None
+    frames: list = field(default_factory=list)
+
+
+def mesh_gallery(panels: list[Panel], path: str | Path, ncols: int = 4, elev: float = 12.0,
+                 azim: float = -70.0) -> None:
+    """Shaded 3D views, one panel per subplot."""
+    nrows = max(1, -(-len(panels) // ncols))
     fig = plt.figure(figsize=(3.0 * ncols, 3.0 * nrows))
-    for k, (title, v, f, rgba) in enumerate(items):
+    for k, panel in enumerate(panels):
         ax = fig.add_subplot(nrows, ncols, k + 1, projection="3d")
-        tri = v[f]
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-12
-        shade = 0.35 + 0.65 * np.clip(normal @ _LIGHT, 0, 1)
-        colors = np.clip(np.outer(shade, rgba[:3]), 0, 1)
-        ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolors="none"))
-        lo, hi = v.min(0), v.max(0)
+        for v, f, rgba in panel.meshes:
+            tri = v[f]
+            normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-12
+            shade = 0.35 + 0.65 * np.clip(normal @ _LIGHT, 0, 1)
+            colors = np.clip(np.outer(shade, rgba[:3]), 0, 1)
+            ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolors="none",
+                                                 alpha=rgba[3]))
+        allv = np.vstack([m[0] for m in panel.meshes])
+        if panel.points is not None:
+            ax.scatter(*np.asarray(panel.points).T, color="red", s=18, depthshade=False)
+        for origin, rot in panel.frames:
+            for axis, color in zip(rot.T, ("red", "green", "blue")):
+                ax.quiver(*origin, *(0.03 * axis), color=color, linewidth=1.5)
+        lo, hi = allv.min(0), allv.max(0)
         c, half = (lo + hi) / 2, (hi - lo).max() / 2 + 1e-3
         ax.set(xlim=(c[0] - half, c[0] + half), ylim=(c[1] - half, c[1] + half),
                zlim=(c[2] - half, c[2] + half))
         ax.set_box_aspect((1, 1, 1))
         ax.view_init(elev=elev, azim=azim)
         ax.set_axis_off()
-        ax.set_title(title, fontsize=8)
+        ax.set_title(panel.title, fontsize=8)
     fig.tight_layout()
     save(fig, path)
 

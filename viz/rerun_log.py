@@ -58,10 +58,14 @@ def recording(stage: str, path: str | Path, title: str) -> Iterator[rr.Recording
 
 
 def log_mesh(rec: rr.RecordingStream, entity: str, vertices: np.ndarray, faces: np.ndarray,
-             rgba, translation=(0.0, 0.0, 0.0), **properties: str) -> None:
-    """A static mesh at ``entity/mesh``, placed at ``translation`` (for galleries), with its
-    properties shown in the selection panel and as a label."""
-    rec.log(entity, rr.Transform3D(translation=translation), static=True)
+             rgba, translation=(0.0, 0.0, 0.0), pose: np.ndarray | None = None,
+             **properties: str) -> None:
+    """A static mesh at ``entity/mesh``; ``entity`` placed at ``pose`` (4×4) or else at
+    ``translation`` (for galleries); properties shown in the selection panel and as a label."""
+    if pose is not None:
+        log_pose(rec, entity, pose)
+    else:
+        rec.log(entity, rr.Transform3D(translation=translation), static=True)
     rec.log(
         f"{entity}/mesh",
         rr.Mesh3D(vertex_positions=vertices.astype(np.float32),
@@ -73,3 +77,20 @@ def log_mesh(rec: rr.RecordingStream, entity: str, vertices: np.ndarray, faces: 
         label = " ".join([entity.rsplit("/", 1)[-1], *properties.values()])
         top = [float(vertices[:, 0].mean()), 0.0, float(vertices[:, 2].max()) + 0.02]
         rec.log(f"{entity}/label", rr.Points3D([top], labels=[label], radii=0.001), static=True)
+
+
+def log_pose(rec: rr.RecordingStream, entity: str, t: np.ndarray) -> None:
+    """Place ``entity`` at the 4×4 pose ``t`` relative to its parent (static)."""
+    rec.log(entity, rr.Transform3D(translation=t[:3, 3], mat3x3=t[:3, :3]), static=True)
+
+
+def log_points(rec: rr.RecordingStream, entity: str, points, rgb=(230, 30, 30),
+               radius: float = 0.003, labels=None) -> None:
+    rec.log(entity, rr.Points3D(np.atleast_2d(points), colors=[rgb], radii=radius,
+                                labels=labels), static=True)
+
+
+def log_axes(rec: rr.RecordingStream, entity: str, origin, rotation, length: float = 0.03) -> None:
+    """An x/y/z triad (red/green/blue) at ``origin`` with axes the columns of ``rotation``."""
+    rec.log(entity, rr.Arrows3D(origins=[origin] * 3, vectors=(length * np.asarray(rotation).T),
+                                colors=[(230, 40, 40), (40, 200, 40), (40, 80, 230)]), static=True)

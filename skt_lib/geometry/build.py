@@ -89,6 +89,8 @@ def build_support(task: SupportTask) -> dict:
         "clearance_above_m": diff.clearance_above_m,
         "tip_turn_deg": diff.tip_turn_deg,
         "hang_point": list(diff.hang_point),
+        "hang_tangent": list(diff.hang_tangent),
+        "arm_centreline": arm.points.tolist(),
         "n_parts": len(parts),
         "volume_m3": visual.volume,
         "part_iou": iou,

@@ -230,6 +230,7 @@ class Difficulty:
     clearance_above_m: float  # free space above the arm at the hang point (1.0: none above)
     tip_turn_deg: float  # total turning of the arm from the hang point to its tip
     hang_point: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0))  # arm centreline
+    hang_tangent: tuple[float, float, float] = field(default=(1.0, 0.0, 0.0))  # arm direction
 
 
 def _densify(points: np.ndarray, step: float = 0.001) -> np.ndarray:
@@ -286,7 +287,8 @@ def measure_difficulty(shape: SupportShape, p: MeshGenParams) -> Difficulty:
         level = 3
     if clearance < p.narrow_gap_m:
         level = min(level + 1, 3)
-    return Difficulty(LEVELS[level], blocking, clearance, turn, tuple(float(v) for v in c))
+    return Difficulty(LEVELS[level], blocking, clearance, turn, tuple(float(v) for v in c),
+                      tuple(float(v) for v in t))
 
 
 def sample_support(

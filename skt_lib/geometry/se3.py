@@ -1,0 +1,64 @@
+"""SE(3) helpers. Quaternions are xyzw (PyBullet and scipy order); rotations (3, 3)."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+GRAVITY_DIR = np.array([0.0, 0.0, -1.0])  # unit gravity, support and world frames
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    return Rotation.from_quat(np.asarray(q, dtype=np.float64)).as_matrix()
+
+
+def matrix_to_quat(m) -> np.ndarray:
+    return Rotation.from_matrix(np.asarray(m, dtype=np.float64)).as_quat()
+
+
+def pose_matrix(position, quat) -> np.ndarray:
+    """4×4 homogeneous transform from a position (3,) and an xyzw quaternion."""
+    t = np.eye(4)
+    t[:3, :3] = quat_to_matrix(quat)
+    t[:3, 3] = position
+    return t
+
+
+def matrix_pose(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return np.asarray(t[:3, 3], dtype=np.float64), matrix_to_quat(t[:3, :3])
+
+
+def invert(t: np.ndarray) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3] = t[:3, :3].T
+    out[:3, 3] = -t[:3, :3].T @ t[:3, 3]
+    return out
+
+
+def transform_points(t: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a 4×4 transform to ``points (N, 3)``."""
+    return np.asarray(points) @ t[:3, :3].T + t[:3, 3]
+
+
+def skt_rotation(moving_dir, gravity=GRAVITY_DIR) -> np.ndarray:
+    """The SKT rotation rule (paper §III-A): x = unit moving direction, y = x × g, z = x × y.
+
+    Columns are the axes. Raises ``ValueError`` when the motion is (nearly) vertical, where
+    the rule is undefined.
+    """
+    x = np.asarray(moving_dir, dtype=np.float64)
+    norm = np.linalg.norm(x)
+    if not np.isfinite(norm) or norm < 1e-12:
+        raise ValueError("moving_dir: zero or non-finite")
+    x = x / norm
+    y = np.cross(x, np.asarray(gravity, dtype=np.float64))
+    if np.linalg.norm(y) < 1e-6:
+        raise ValueError("moving_dir: parallel to gravity, the SKT rule is undefined")
+    y /= np.linalg.norm(y)
+    z = np.cross(x, y)
+    return np.stack([x, y, z], axis=1)
+
+
+def random_rotation_small(rng: np.random.Generator, max_deg: float) -> np.ndarray:
+    """A rotation about a uniformly random axis by an angle uniform in [0, max_deg]."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    return Rotation.from_rotvec(axis * np.radians(rng.uniform(0, max_deg))).as_matrix()

@@ -1,0 +1,1 @@
+"""PyBullet simulation: worlds, the hanging perturbation and predicate, contact simulation."""
