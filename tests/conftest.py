@@ -45,3 +45,21 @@ def write_params(tmp_path):
         return path
 
     return _write
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(tmp_path_factory):
+    """mesh_gen + contact_sim + rotation_extraction run once on TINY params.
+
+    Returns (params path, data root, reports root)."""
+    from stages import contact_sim, mesh_gen, rotation_extraction
+
+    root = tmp_path_factory.mktemp("tiny")
+    params = root / "params.yaml"
+    params.write_text(yaml.safe_dump(TINY))
+    data, reports = root / "data", root / "reports"
+    for stage in (mesh_gen, contact_sim, rotation_extraction):
+        name = stage.__name__.rsplit(".", 1)[-1]
+        assert stage.main(["--params", str(params), "--data-root", str(data),
+                           "--data-dir", str(data / name), "--reports-dir", str(reports / name)]) == 0
+    return params, data, reports

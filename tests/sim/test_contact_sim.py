@@ -1,0 +1,109 @@
+"""contact_sim and rotation_extraction on the tiny dataset."""
+
+import json
+
+import numpy as np
+import pytest
+
+from skt_lib.config import load_params
+from skt_lib.geometry.se3 import pose_matrix, skt_rotation
+from skt_lib.io import read_table
+from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
+from skt_lib.sim.contact_sim import arm_site, perturbation
+from skt_lib.sim.hanging import check_hang, perturb
+from skt_lib.sim.keypoints import keypoint_from_hang, orthonormality_error
+from skt_lib.sim.world import World
+from stages import contact_sim
+
+pytestmark = pytest.mark.slow
+
+
+def _tables(data):
+    return (read_table(data / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id"),
+            read_table(data / "mesh_gen" / "objects.parquet", OBJECTS),
+            read_table(data / "contact_sim" / "contacts.parquet", CONTACTS))
+
+
+def _hang_again(params_path, data, support_id, offset=(0.0, 0.0, 0.0)):
+    """Place the reference at its stored hanging pose (+ offset), perturb, judge."""
+    p = load_params(params_path).contact_sim
+    supports, objects, contacts = _tables(data)
+    row = contacts.set_index("item_id").loc[support_id]
+    ref = objects[objects["is_reference"]].iloc[0]
+    goal = pose_matrix(row["hang_position"], row["hang_quat"])
+    goal[:3, 3] += offset
+    with World(p.dt, p.solver_iterations) as world:
+        world.add_wall()
+        sup = world.load(str(data / "mesh_gen" / supports.loc[support_id, "urdf_path"]),
+                         np.eye(4), fixed=True, friction=p.friction)
+        obj = world.load(str(data / "mesh_gen" / ref["urdf_path"]), goal, fixed=False,
+                         friction=p.friction)
+        start_clearance = world.min_distance(obj, sup)
+        perturb(world, perturbation(p))
+        return check_hang(world, obj, sup), world.pose_support(obj), goal, start_clearance
+
+
+def test_contract_and_success(tiny_dataset):
+    _, data, reports = tiny_dataset
+    supports, objects, contacts = _tables(data)
+    m = json.loads((reports / "contact_sim" / "metrics.json").read_text())
+    assert m["n_supports"] == len(supports) == 12
+    assert m["support_success_rate"] >= 0.95 and m["n_objects_ok"] == m["n_objects"] == 5
+    ok = contacts[contacts["ok"]]
+    assert np.isfinite(np.stack(ok["hang_quat"])).all()
+    assert (ok["goal_clearance_m"] >= 0.00025).all()  # stored goals are collision-free
+    k = json.loads((reports / "rotation_extraction" / "metrics.json").read_text())
+    assert k["n_keypoints"] == 6 and k["max_orthonormality_error"] <= 1e-6
+    kp = read_table(data / "rotation_extraction" / "keypoints.parquet", KEYPOINTS)
+    for r in kp.itertuples():
+        rot = np.reshape(r.rotation, (3, 3))
+        assert orthonormality_error(rot) <= 1e-9
+        assert np.linalg.norm(r.position) < 0.06  # on the aperture, near the object origin
+
+
+def test_stored_hanging_pose_is_stable_and_3cm_off_falls(tiny_dataset):
+    params, data, _ = tiny_dataset
+    _, _, contacts = _tables(data)
+    for sid in contacts[(contacts["kind"] == "reference_on_support") & contacts["ok"]]["item_id"][:4]:
+        check, pose, goal, clearance = _hang_again(params, data, sid)
+        assert clearance > 0, sid  # collision-free goal
+        assert check.ok, (sid, check.reason)
+        assert np.linalg.norm(pose[:3, 3] - goal[:3, 3]) < 0.01, sid
+        off, _, _, _ = _hang_again(params, data, sid, offset=(0.0, 0.03, 0.0))
+        assert not off.ok, sid
+        assert off.reason in ("touches_floor", "no_contact")
+
+
+def test_same_seed_same_table_on_one_or_two_workers(tiny_dataset, tmp_path):
+    params, data, _ = tiny_dataset
+    text = params.read_text().replace("n_workers: 1", "n_workers: 2")
+    two = tmp_path / "two.yaml"
+    two.write_text(text)
+    out = tmp_path / "contact_sim"
+    assert contact_sim.main(["--params", str(two), "--data-root", str(data), "--data-dir", str(out),
+                             "--reports-dir", str(tmp_path / "rep")]) == 0
+    assert (out / "contacts.parquet").read_bytes() == \
+        (data / "contact_sim" / "contacts.parquet").read_bytes()
+
+
+def test_arm_site_walks_along_the_polyline():
+    arm = np.array([[0, 0, 0], [0.1, 0, 0], [0.1, 0, 0.1]], float)
+    p, t = arm_site(arm, np.array([0.05, 0, 0.01]), 0.0)
+    assert p == pytest.approx([0.05, 0, 0]) and t == pytest.approx([1, 0, 0])
+    p, t = arm_site(arm, np.array([0.05, 0, 0]), 0.08)  # round the corner
+    assert p == pytest.approx([0.1, 0, 0.03]) and t == pytest.approx([0, 0, 1])
+    p, _ = arm_site(arm, np.array([0.05, 0, 0]), -1.0)  # clipped at the wall end
+    assert p == pytest.approx([0, 0, 0])
+
+
+def test_keypoint_rule_on_known_poses():
+    kp = keypoint_from_hang(np.eye(4), [0, 0, 0.02], 0.05)
+    assert kp.rotation == pytest.approx(np.diag([-1.0, -1.0, 1.0]))  # x=-x, y=x×g, z=x×y
+    assert kp.p_front - kp.p_hang == pytest.approx([0.05, 0, 0])
+    tilt = pose_matrix([0.1, 0, -0.02], [0, 0, np.sin(0.2), np.cos(0.2)])
+    kp = keypoint_from_hang(tilt, [0.0, 0.01, 0.02], 0.05)
+    assert tilt[:3, :3] @ kp.rotation == pytest.approx(skt_rotation([-1, 0, 0]))
+    with pytest.raises(ValueError, match="parallel to gravity"):
+        skt_rotation([0, 0, -1])
+    with pytest.raises(ValueError, match="contact_object"):
+        keypoint_from_hang(np.eye(4), [np.nan, 0, 0], 0.05)
