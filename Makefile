@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: env repro test clean-env
+.PHONY: env repro test bench clean-env
 
 env: $(STAMP)
 
@@ -35,6 +35,10 @@ repro: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
+
+bench: $(STAMP)
+	@# speed figures into reports/bench/bench.json; needs the artifacts of `make repro`
+	$(BIN)/python -m stages.bench
 
 clean-env:
 	rm -rf $(VENV)

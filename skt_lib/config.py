@@ -114,12 +114,38 @@ class RotationExtractionParams(_Section):
     front_offset_m: float = Field(gt=0.0, le=0.5, description="How far P_front lies back along the approach.")
 
 
+class RrtSktsParams(_Section):
+    n_skts_per_support: int = Field(ge=1, le=500, description="Planned SKTs per support (paper: 50).")
+    start_dx_m: tuple[float, float] = Field(description="Start keypoint offset range toward the robot.")
+    start_dy_m: float = Field(ge=0.0, le=0.3, description="Start keypoint offset half-range along the wall.")
+    start_dz_m: tuple[float, float] = Field(description="Start keypoint offset range upward.")
+    start_rot_deg: float = Field(ge=0.0, le=90.0, description="Max start rotation from the hang orientation.")
+    max_start_tries: int = Field(ge=1, le=10000, description="Draws for a collision-free start.")
+    range_m: float = Field(gt=0.0, le=0.5, description="RRT-Connect extension length (SE(3) metric).")
+    check_step_m: float = Field(gt=0.0, le=0.01, description="Planner's motion-check spacing.")
+    planner_clearance_m: float = Field(ge=0.0, le=0.005, description="PyBullet distance the planner keeps.")
+    max_checks: int = Field(ge=100, le=10_000_000, description="Planning budget in validity checks.")
+    simplify_steps: int = Field(ge=0, le=100000, description="Shortcut / vertex-reduction attempts.")
+    dense_step_m: float = Field(gt=0.0, le=0.001, description="Spacing of stored states (≤ 1 mm).")
+    recheck_spacing_m: float = Field(gt=0.0, le=0.01, description="Surface sample spacing of the re-check.")
+    recheck_step_m: float = Field(gt=0.0, le=0.001, description="Max object-point motion between re-checked states.")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "RrtSktsParams":
+        _check_range("start_dx_m", self.start_dx_m)
+        _check_range("start_dz_m", self.start_dz_m)
+        if self.start_dx_m[0] <= 0:
+            raise ValueError("start_dx_m: starts must lie in front of the hang (> 0)")
+        return self
+
+
 class Params(_Section):
     common: CommonParams
     compute: ComputeParams
     mesh_gen: MeshGenParams
     contact_sim: ContactSimParams
     rotation_extraction: RotationExtractionParams
+    rrt_skts: RrtSktsParams
 
 
 def _format_error(source: str, err: ValidationError) -> str:

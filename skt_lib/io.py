@@ -17,6 +17,9 @@ import pyarrow.parquet as pq
 
 from skt_lib.errors import DataError
 
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
 SCHEMA_KEY = b"skt_hang.schema"
 VERSION_KEY = b"skt_hang.schema_version"
 
@@ -31,6 +34,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the usual mode
         os.replace(tmp_path, path)
     finally:
         if tmp_path.exists():

@@ -88,3 +88,19 @@ KEYPOINTS = TableSchema(
         "p_front": _VEC3,
     },
 )
+
+SKTS = TableSchema(
+    "skts",
+    1,
+    {
+        "support_id": pa.string(),
+        "skt_index": pa.int32(),
+        "n_states": pa.int32(),
+        "keypoints": pa.list_(_VEC3),
+        "positions": pa.list_(_VEC3),
+        "quats": pa.list_(_VEC4),
+        "path_length_m": pa.float64(),
+        "min_clearance_m": pa.float64(),
+        "n_checks": pa.int64(),
+    },
+)

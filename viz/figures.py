@@ -30,6 +30,7 @@ class Panel:
     meshes: list = field(default_factory=list)
     points: np.ndarray | None = None
     frames: list = field(default_factory=list)
+    lines: list = field(default_factory=list)  # polylines (M, 3), drawn in blue
 
 
 def mesh_gallery(panels: list[Panel], path: str | Path, ncols: int = 4, elev: float = 12.0,
@@ -50,6 +51,8 @@ def mesh_gallery(panels: list[Panel], path: str | Path, ncols: int = 4, elev: fl
         allv = np.vstack([m[0] for m in panel.meshes])
         if panel.points is not None:
             ax.scatter(*np.asarray(panel.points).T, color="red", s=18, depthshade=False)
+        for line in panel.lines:
+            ax.plot(*np.asarray(line).T, color="tab:blue", linewidth=1.0)
         for origin, rot in panel.frames:
             for axis, color in zip(rot.T, ("red", "green", "blue")):
                 ax.quiver(*origin, *(0.03 * axis), color=color, linewidth=1.5)
@@ -77,5 +80,13 @@ def bar_chart(counts: dict[str, dict[str, int]], path: str | Path, title: str) -
     ax.set_xticks(x + width * (len(groups) - 1) / 2, keys, rotation=30, ha="right", fontsize=8)
     ax.set_title(title)
     ax.legend(fontsize=8)
+    fig.tight_layout()
+    save(fig, path)
+
+
+def histogram(values, path: str | Path, title: str, xlabel: str, bins: int = 30) -> None:
+    fig, ax = plt.subplots(figsize=(5, 3))
+    ax.hist(np.asarray(values), bins=bins, color="tab:blue")
+    ax.set(title=title, xlabel=xlabel, ylabel="count")
     fig.tight_layout()
     save(fig, path)

@@ -94,3 +94,8 @@ def log_axes(rec: rr.RecordingStream, entity: str, origin, rotation, length: flo
     """An x/y/z triad (red/green/blue) at ``origin`` with axes the columns of ``rotation``."""
     rec.log(entity, rr.Arrows3D(origins=[origin] * 3, vectors=(length * np.asarray(rotation).T),
                                 colors=[(230, 40, 40), (40, 200, 40), (40, 80, 230)]), static=True)
+
+
+def log_strip(rec: rr.RecordingStream, entity: str, points, rgb=(40, 110, 230)) -> None:
+    """A static polyline (e.g. an SKT's keypoint path)."""
+    rec.log(entity, rr.LineStrips3D([np.asarray(points)], colors=[rgb], radii=0.0008), static=True)

@@ -155,10 +155,11 @@ def _upturned_tip(rng, r, sq, rise, p):
 
 
 def _s_hook(rng, r, sq, rise, p):
+    """A peg bent down into a drop and a J: an S-hook fused to its peg, in side view."""
     rho1, rho2 = _u(rng, 0.01, 0.018), _u(rng, 0.014, 0.024)
-    tip_turn = _u(rng, 30, 120)
-    path = _Path(_WALL, 0.0).straight(rho2 + _u(rng, 0.025, 0.045))
-    path.arc(rho1, -180).arc(rho2, 180 + tip_turn)
+    tip_turn = _u(rng, 50, 110)  # tip heading above horizontal, past the bottom of the J
+    path = _Path(_WALL, 0.0).straight(_u(rng, 0.03, 0.05)).arc(rho1, -90)
+    path.straight(_u(rng, 0.02, 0.045)).arc(rho2, 90 + tip_turn)
     base = rho2 * (1 - math.cos(math.radians(tip_turn)))
     path.straight(max((rise - base) / math.sin(math.radians(tip_turn)), 0.004))
     return SupportShape("s_hook", (Stroke(path.array(), r, sq),))
@@ -174,12 +175,13 @@ def _double_hook(rng, r, sq, rise, p):
 
 
 def _narrow_gap_hook(rng, r, sq, rise, p):
+    """A J-hook with a bar from the wall reaching over its tip: objects thread through the
+    gap between the bar and the tip."""
     lower = _j_path(rng, rise, _u(rng, -5, 0), _u(rng, 0.05, 0.09))
     pts = lower.array()
-    gap = _u(rng, 0.45, 0.9) * p.narrow_gap_m
-    top = pts[:, 2].min() + gap + 2 * r
-    reach = pts[:, 0].max() - _u(rng, 0.0, 0.01)
-    upper = np.array([[_WALL[0], 0.0, top], [reach, 0.0, top]])
+    tip = pts[np.argmax(pts[:, 2])]
+    top = tip[2] + 2 * r + _u(rng, 0.5, 0.9) * p.narrow_gap_m
+    upper = np.array([[_WALL[0], 0.0, top], [tip[0] + _u(rng, -0.01, 0.005), 0.0, top]])
     return SupportShape("narrow_gap_hook", (Stroke(pts, r, sq), Stroke(upper, r, sq)))
 
 
@@ -227,7 +229,7 @@ LEVEL_FAMILIES = {
 class Difficulty:
     level: str
     blocking_height_m: float  # lift over tip/knob/curl beyond the hang point, ⊥ to the arm
-    clearance_above_m: float  # free space above the arm at the hang point (1.0: none above)
+    clearance_above_m: float  # free space between the arm (hang point → tip) and structure above it (1.0: none)
     tip_turn_deg: float  # total turning of the arm from the hang point to its tip
     hang_point: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0))  # arm centreline
     hang_tangent: tuple[float, float, float] = field(default=(1.0, 0.0, 0.0))  # arm direction
@@ -271,6 +273,9 @@ def measure_difficulty(shape: SupportShape, p: MeshGenParams) -> Difficulty:
     dirs = np.vstack([t, seg[i:] / np.linalg.norm(seg[i:], axis=1, keepdims=True)])
     turn = float(np.degrees(np.arccos(np.clip((dirs[:-1] * dirs[1:]).sum(1), -1, 1))).sum())
 
+    # clearance: free space between the arm from the hang point to its tip and any other
+    # structure above the arm line and not behind the hang point
+    beyond = pts[i:]
     others = [(pts[(s < s[i] - 0.025)], arm.radius)]
     others += [(_densify(st.points), st.radius) for st in shape.strokes[1:]]
     clearance = 1.0
@@ -278,9 +283,10 @@ def measure_difficulty(shape: SupportShape, p: MeshGenParams) -> Difficulty:
         if len(q) == 0:
             continue
         a, b = (q - c) @ t, (q - c) @ n
-        above = (a >= -0.01) & (b > arm.radius + rq)
-        if above.any():
-            clearance = min(clearance, float((b[above] - rq - arm.radius).min()))
+        q = q[(a >= -0.01) & (b > arm.radius + rq)]
+        if len(q):
+            gap = np.linalg.norm(q[:, None] - beyond[None], axis=2).min() - rq - arm.radius
+            clearance = min(clearance, float(gap))
 
     level = int(np.searchsorted(np.asarray(p.level_rise_m), blocking, side="right"))
     if turn >= p.curl_very_hard_deg:

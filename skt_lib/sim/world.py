@@ -27,6 +27,8 @@ class World:
                                      deterministicOverlappingPairs=1, physicsClientId=self.cid)
         self.floor = None
         self._inertial: dict[int, np.ndarray] = {}  # body -> link-frame pose of its COM frame
+        self._inertial_pq: dict[int, tuple] = {}  # the same as (position, xyzw quaternion)
+        self._support_pq = tuple(map(tuple, matrix_pose(SUPPORT_POSE_WORLD)))
         if with_floor:
             shape = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=self.cid)
             self.floor = pb.createMultiBody(0, shape, physicsClientId=self.cid)
@@ -68,6 +70,7 @@ class World:
                           rollingFriction=0.0001, physicsClientId=self.cid)
         info = pb.getDynamicsInfo(body, -1, physicsClientId=self.cid)
         self._inertial[body] = pose_matrix(info[3], info[4])
+        self._inertial_pq[body] = (info[3], info[4])
         return body
 
     def pose_support(self, body: int) -> np.ndarray:
@@ -82,6 +85,13 @@ class World:
         pos, quat = matrix_pose(self.to_world(t_support) @ self._inertial[body])
         pb.resetBasePositionAndOrientation(body, pos, quat, physicsClientId=self.cid)
         pb.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=self.cid)
+
+    def set_pose_support_pq(self, body: int, position, quat) -> None:
+        """Fast path of :meth:`set_pose_support` for planners: position (3,) and xyzw
+        quaternion of the link frame in the support frame; velocities untouched."""
+        pos, orn = pb.multiplyTransforms(*self._support_pq, position, quat)
+        pos, orn = pb.multiplyTransforms(pos, orn, *self._inertial_pq[body])
+        pb.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=self.cid)
 
     def com_support(self, body: int) -> np.ndarray:
         """Centre of mass of ``body`` in the support frame."""

@@ -1,0 +1,1 @@
+"""Motion planning of the reference object (OMPL RRT-Connect) and SKT post-processing."""

@@ -1,0 +1,69 @@
+"""Keypoint trajectories: conversion from object poses, SKT frames, resampling.
+
+An SKT is ``T`` waypoints ξ_0..ξ_{T-1} in the support frame, ξ_0 at the hanging pose;
+execution runs ξ_{T-1} → ξ_0. Positions are ``(T, 3)`` float64 metres.
+"""
+
+import numpy as np
+
+from skt_lib.geometry.se3 import skt_rotation, transform_points
+
+
+def keypoint_positions(poses: np.ndarray, keypoint: np.ndarray) -> np.ndarray:
+    """Keypoint positions ``(N, 3)`` for object poses ``(N, 4, 4)`` and an object-frame
+    keypoint ``(3,)``."""
+    poses = np.asarray(poses)
+    return np.einsum("nij,j->ni", poses[:, :3, :3], keypoint) + poses[:, :3, 3]
+
+
+def arc_length(positions: np.ndarray) -> np.ndarray:
+    """Cumulative arc length ``(N,)`` starting at 0."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
+
+
+def resample(positions: np.ndarray, n: int) -> np.ndarray:
+    """``n`` points at equal arc-length spacing along the polyline ``positions (N, 3)``;
+    the first and last points are kept exactly."""
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.ndim != 2 or positions.shape[1] != 3 or len(positions) < 2:
+        raise ValueError(f"positions: expected (N>=2, 3), got {positions.shape}")
+    if n < 2:
+        raise ValueError(f"n: need at least 2 waypoints, got {n}")
+    s = arc_length(positions)
+    if s[-1] <= 0:
+        raise ValueError("positions: zero-length trajectory")
+    targets = np.linspace(0.0, s[-1], n)
+    out = np.stack([np.interp(targets, s, positions[:, k]) for k in range(3)], axis=1)
+    out[0], out[-1] = positions[0], positions[-1]
+    return out
+
+
+def skt_frames(positions: np.ndarray) -> np.ndarray:
+    """SE(3) waypoints ``(T, 4, 4)`` for SKT positions ``(T, 3)`` ordered ξ_0 (hang) first.
+
+    Each waypoint's x axis is the unit direction of motion toward the hang (from ξ_{i+1} to
+    ξ_i; ξ_{T-1} reuses the next segment), y = x × g, z = x × y."""
+    positions = np.asarray(positions, dtype=np.float64)
+    motion = positions[:-1] - positions[1:]  # motion arriving at waypoint i (execution order)
+    motion = np.vstack([motion, motion[-1:]])
+    out = np.tile(np.eye(4), (len(positions), 1, 1))
+    rots: list[np.ndarray | None] = []
+    for d in motion:
+        try:
+            rots.append(skt_rotation(d))
+        except ValueError:  # vertical or zero motion: the rule is undefined here
+            rots.append(None)
+    known = [i for i, r in enumerate(rots) if r is not None]
+    if not known:
+        raise ValueError("positions: every segment is vertical; SKT rotations are undefined")
+    for i in range(len(positions)):
+        nearest = min(known, key=lambda k: (abs(k - i), k))
+        out[i, :3, :3] = rots[nearest]
+        out[i, :3, 3] = positions[i]
+    return out
+
+
+def max_point_step(poses: np.ndarray, points: np.ndarray) -> float:
+    """Largest displacement of any of ``points`` (object frame) between consecutive poses."""
+    pts = np.stack([transform_points(t, points) for t in poses])
+    return float(np.linalg.norm(np.diff(pts, axis=0), axis=2).max())

@@ -1,0 +1,74 @@
+"""bench — speed figures as JSON (``make bench``), kept apart from the tests.
+
+Runs on the artifacts of ``make repro`` with the committed params and merges its keys into
+``reports/bench/bench.json``:
+
+- ``rrt_plan_s_median``: median OMPL planning time per SKT attempt (1 process per support);
+- ``rrt_skts_per_min``: SKTs (planned + independently re-checked) per minute of wall time
+  on ``compute.n_workers`` workers, over a sample of supports balanced across levels;
+- ``rrt_recheck_s_median``: median re-check time per SKT.
+Medians, because these machines are noisy.
+"""
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from skt_lib.config import LEVELS, load_params
+from skt_lib.io import read_table, write_json_atomic
+from skt_lib.planning.skts import SktTask, plan_support_skts
+from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
+from stages._common import run_items
+
+
+def rrt_bench(params, root: Path, per_level: int) -> dict:
+    p, mg = params.rrt_skts, root / "mesh_gen"
+    supports = read_table(mg / "supports.parquet", SUPPORTS).set_index("support_id")
+    ref = read_table(mg / "objects.parquet", OBJECTS).query("is_reference").iloc[0]
+    kp = read_table(root / "rotation_extraction" / "keypoints.parquet", KEYPOINTS).query("is_reference")
+    hangs = read_table(root / "contact_sim" / "contacts.parquet", CONTACTS)
+    hangs = hangs[(hangs["kind"] == "reference_on_support") & hangs["ok"]]
+    chosen = [sid for lv in LEVELS
+              for sid in [s for s in hangs["support_id"] if supports.loc[s, "difficulty"] == lv][:per_level]]
+    hangs = hangs.set_index("support_id")
+    tasks = [SktTask(s, str(mg / supports.loc[s, "urdf_path"]), str(mg / supports.loc[s, "mesh_path"]),
+                     str(mg / ref["urdf_path"]), str(mg / ref["mesh_path"]), tuple(kp.iloc[0]["position"]),
+                     tuple(hangs.loc[s, "hang_position"]), tuple(hangs.loc[s, "hang_quat"]),
+                     params.common.seed, p) for s in chosen]
+    t0 = time.perf_counter()
+    results, _, _ = run_items(plan_support_skts, tasks, params.compute, "bench rrt")
+    wall = time.perf_counter() - t0
+    n = sum(len(r["skts"]) for r in results)
+    return {
+        "rrt_plan_s_median": float(np.median([t for r in results for t in r["plan_s"]])),
+        "rrt_recheck_s_median": float(np.median([t for r in results for t in r["recheck_s"]])),
+        "rrt_skts_per_min": 60.0 * n / wall,
+        "rrt_bench_supports": len(tasks),
+        "rrt_bench_skts": n,
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="stages.bench", description=__doc__.splitlines()[0])
+    ap.add_argument("--params", default="params.yaml")
+    ap.add_argument("--data-root", default="data")
+    ap.add_argument("--out", default="reports/bench/bench.json")
+    ap.add_argument("--per-level", type=int, default=3, help="supports per difficulty level")
+    args = ap.parse_args(argv)
+    params = load_params(args.params)
+    out = Path(args.out)
+    bench = json.loads(out.read_text()) if out.is_file() else {}
+    bench.update(rrt_bench(params, Path(args.data_root), args.per_level))
+    bench["machine"] = f"{platform.machine()}, {__import__('os').cpu_count()} cores, {params.compute.n_workers} workers"
+    write_json_atomic(out, bench)
+    print(json.dumps(bench, indent=2, sort_keys=True))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
