@@ -139,6 +139,44 @@ class RrtSktsParams(_Section):
         return self
 
 
+class RenderViewsParams(_Section):
+    n_azimuth: int = Field(ge=1, le=64, description="Camera azimuths (n_azimuth × n_elevation views).")
+    n_elevation: int = Field(ge=1, le=64, description="Camera elevations.")
+    azimuth_deg: tuple[float, float] = Field(description="Azimuth span; 0 = in front (+x).")
+    elevation_deg: tuple[float, float] = Field(description="Elevation span; positive = above.")
+    distance_m: float = Field(gt=0.05, le=3.0, description="Camera distance from the support's centre.")
+    fov_deg: float = Field(gt=5.0, lt=170.0, description="Vertical field of view.")
+    width: int = Field(ge=16, le=4096, description="Image width, pixels.")
+    height: int = Field(ge=16, le=4096, description="Image height, pixels.")
+    n_points: int = Field(ge=16, le=100000, description="Points per view after farthest-point sampling.")
+    noise_std_m: float = Field(ge=0.0, le=0.01, description="Depth noise along the ray; 0 = off.")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "RenderViewsParams":
+        _check_range("azimuth_deg", self.azimuth_deg)
+        _check_range("elevation_deg", self.elevation_deg)
+        if not -90 < self.elevation_deg[0] and self.elevation_deg[1] < 90:
+            raise ValueError("elevation_deg: must lie strictly between -90 and 90")
+        if not -90 <= self.azimuth_deg[0] and self.azimuth_deg[1] <= 90:
+            raise ValueError("azimuth_deg: cameras must stay in front of the wall (|az| <= 90)")
+        return self
+
+
+class AffordanceMapsParams(_Section):
+    sigma_m: float = Field(gt=0.0, le=0.05, description="Gaussian width of both maps (paper: 0.005).")
+    alpha: float = Field(ge=0.0, le=1.0, description="Weight of the contact map.")
+    beta: float = Field(ge=0.0, le=1.0, description="Weight of the segmentation map.")
+    hanging_part_m: float = Field(gt=0.0, le=0.2, description="SKT arc length from ξ_0 that is the hanging part.")
+    visible_tol_m: float = Field(gt=0.0, le=0.05, description="Contact visible if a cloud point is this close.")
+
+
+class ClusteringParams(_Section):
+    T: int = Field(ge=2, le=200, description="Waypoints per SKT (paper: 40; sweep 10/20/40).")
+    k: int = Field(ge=1, le=50, description="Template families (paper: 5).")
+    n_init: int = Field(ge=1, le=100, description="k-means++ restarts.")
+    max_iter: int = Field(ge=1, le=10000, description="Lloyd iterations per restart.")
+
+
 class Params(_Section):
     common: CommonParams
     compute: ComputeParams
@@ -146,6 +184,9 @@ class Params(_Section):
     contact_sim: ContactSimParams
     rotation_extraction: RotationExtractionParams
     rrt_skts: RrtSktsParams
+    render_views: RenderViewsParams
+    affordance_maps: AffordanceMapsParams
+    clustering: ClusteringParams
 
 
 def _format_error(source: str, err: ValidationError) -> str:

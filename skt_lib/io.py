@@ -4,14 +4,17 @@ Every artifact is written to a temporary file in the destination directory and r
 into place, so a killed run never leaves a half-written file that looks valid.
 """
 
+import io
 import json
 import os
 import tempfile
+import zipfile
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -118,3 +121,42 @@ def read_table(path: str | Path, schema: TableSchema):
     if extra:
         raise DataError(f"{path}: unexpected columns {sorted(extra)}")
     return table.to_pandas()
+
+
+def write_npz_atomic(path: str | Path, arrays: Mapping[str, np.ndarray]) -> None:
+    """An ``.npz`` (zip of ``.npy``, no pickle) with fixed entry dates, so equal arrays give
+    equal bytes (numpy's own writer stamps the current time)."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name in sorted(arrays):
+            arr = np.asarray(arrays[name])
+            if arr.dtype == object:
+                raise DataError(f"{path}: array {name!r} has dtype object (no pickles on disk)")
+            data = io.BytesIO()
+            np.lib.format.write_array(data, arr, allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            zf.writestr(info, data.getvalue())
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def read_npz(path: str | Path, spec: Mapping[str, tuple[str, int]]) -> dict[str, np.ndarray]:
+    """Read an ``.npz`` and check it: ``spec`` maps key -> (dtype name, ndim)."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: missing")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            out = {k: z[k] for k in z.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
+        raise DataError(f"{path}: not a readable .npz: {err}") from None
+    for key, (dtype, ndim) in spec.items():
+        if key not in out:
+            raise DataError(f"{path}: missing array {key!r}")
+        a = out[key]
+        if a.dtype.name != dtype or a.ndim != ndim:
+            raise DataError(f"{path}: {key!r} is {a.dtype.name} with {a.ndim} dims, "
+                            f"expected {dtype} with {ndim}")
+        if a.dtype.kind == "f" and not np.isfinite(a).all():
+            raise DataError(f"{path}: {key!r} has NaN or infinite values")
+    return out

@@ -104,3 +104,17 @@ SKTS = TableSchema(
         "n_checks": pa.int64(),
     },
 )
+
+LABELS = TableSchema(
+    "labels",
+    1,
+    {
+        "support_id": pa.string(),
+        "split": pa.string(),
+        "difficulty": pa.string(),
+        "category": pa.int32(),
+        "n_skts": pa.int32(),
+        "embedding": pa.list_(pa.float64(), 2),
+        "is_template": pa.bool_(),
+    },
+)

@@ -6,7 +6,10 @@ Runs on the artifacts of ``make repro`` with the committed params and merges its
 - ``rrt_plan_s_median``: median OMPL planning time per SKT attempt (1 process per support);
 - ``rrt_skts_per_min``: SKTs (planned + independently re-checked) per minute of wall time
   on ``compute.n_workers`` workers, over a sample of supports balanced across levels;
-- ``rrt_recheck_s_median``: median re-check time per SKT.
+- ``rrt_recheck_s_median``: median re-check time per SKT;
+- ``render_ms_per_view_median``: ray casting of one 320×240 view (Open3D), and
+  ``render_total_ms_per_view_median``: the whole view (ray casting, FPS to N, shuffle,
+  NPZ write share), over the same sample of supports, one process.
 Medians, because these machines are noisy.
 """
 
@@ -14,6 +17,7 @@ import argparse
 import json
 import platform
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -21,6 +25,7 @@ import numpy as np
 
 from skt_lib.config import LEVELS, load_params
 from skt_lib.io import read_table, write_json_atomic
+from skt_lib.perception.views import RenderTask, render_support
 from skt_lib.planning.skts import SktTask, plan_support_skts
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
 from stages._common import run_items
@@ -53,6 +58,23 @@ def rrt_bench(params, root: Path, per_level: int) -> dict:
     }
 
 
+def render_bench(params, root: Path, per_level: int, tmp: Path) -> dict:
+    supports = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS)
+    chosen = [r for lv in LEVELS
+              for r in list(supports[supports["difficulty"] == lv].itertuples())[:per_level]]
+    render_ms, total_ms = [], []
+    for r in chosen:
+        task = RenderTask(r.support_id, str(root / "mesh_gen" / r.mesh_path),
+                          str(tmp / f"{r.support_id}.npz"), params.common.seed, params.render_views)
+        t0 = time.perf_counter()
+        out = render_support(task)
+        n_views = len(out["render_s"])
+        total_ms.append(1000 * (time.perf_counter() - t0) / n_views)
+        render_ms += [1000 * t for t in out["render_s"]]
+    return {"render_ms_per_view_median": float(np.median(render_ms)),
+            "render_total_ms_per_view_median": float(np.median(total_ms))}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="stages.bench", description=__doc__.splitlines()[0])
     ap.add_argument("--params", default="params.yaml")
@@ -64,6 +86,8 @@ def main(argv=None) -> int:
     out = Path(args.out)
     bench = json.loads(out.read_text()) if out.is_file() else {}
     bench.update(rrt_bench(params, Path(args.data_root), args.per_level))
+    with tempfile.TemporaryDirectory() as tmp:
+        bench.update(render_bench(params, Path(args.data_root), args.per_level, Path(tmp)))
     bench["machine"] = f"{platform.machine()}, {__import__('os').cpu_count()} cores, {params.compute.n_workers} workers"
     write_json_atomic(out, bench)
     print(json.dumps(bench, indent=2, sort_keys=True))

@@ -22,6 +22,9 @@ TINY = {
     },
     "contact_sim": {'dt': 0.004166666666666667, 'solver_iterations': 50, 'friction': 0.6, 'rod_radius_m': 0.005, 'n_drops': 3, 'drop_steps': 480, 'perturb': {'accel_m_s2': 2.0, 'steps_per_direction': 240, 'settle_steps': 480}, 'max_init_tries': 40, 'init_clearance_m': 0.001, 'pose_noise_deg': 6.0, 'roll_noise_deg': 15.0, 'slide_noise_m': 0.03, 'release_gap_m': 0.004, 'consistency_tol_m': 0.01, 'goal_clearance_m': 0.0005},
     "rotation_extraction": {'front_offset_m': 0.05},
+    "render_views": {'n_azimuth': 7, 'n_elevation': 6, 'azimuth_deg': [-60.0, 60.0], 'elevation_deg': [-20.0, 55.0], 'distance_m': 0.35, 'fov_deg': 40.0, 'width': 320, 'height': 240, 'n_points': 1000, 'noise_std_m': 0.0},
+    "affordance_maps": {'sigma_m': 0.005, 'alpha': 0.5, 'beta': 0.5, 'hanging_part_m': 0.03, 'visible_tol_m': 0.005},
+    "clustering": {'T': 10, 'k': 3, 'n_init': 10, 'max_iter': 300},
     "rrt_skts": {'n_skts_per_support': 1, 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'start_rot_deg': 20.0, 'max_start_tries': 100, 'range_m': 0.05, 'check_step_m': 0.0015, 'planner_clearance_m': 0.0002, 'max_checks': 40000, 'simplify_steps': 60, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
 }
 
@@ -50,16 +53,20 @@ def write_params(tmp_path):
 
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
-    """mesh_gen → contact_sim → rotation_extraction → rrt_skts, run once on TINY params.
+    """mesh_gen → … → clustering, run once on TINY params.
 
     Returns (params path, data root, reports root)."""
-    from stages import contact_sim, mesh_gen, rotation_extraction, rrt_skts
+    from stages import (
+        affordance_maps, clustering, contact_sim, mesh_gen, render_views, rotation_extraction,
+        rrt_skts,
+    )
 
     root = tmp_path_factory.mktemp("tiny")
     params = root / "params.yaml"
     params.write_text(yaml.safe_dump(TINY))
     data, reports = root / "data", root / "reports"
-    for stage in (mesh_gen, contact_sim, rotation_extraction, rrt_skts):
+    for stage in (mesh_gen, contact_sim, rotation_extraction, rrt_skts, render_views,
+                  affordance_maps, clustering):
         name = stage.__name__.rsplit(".", 1)[-1]
         assert stage.main(["--params", str(params), "--data-root", str(data),
                            "--data-dir", str(data / name), "--reports-dir", str(reports / name)]) == 0

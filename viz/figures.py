@@ -90,3 +90,39 @@ def histogram(values, path: str | Path, title: str, xlabel: str, bins: int = 30)
     ax.set(title=title, xlabel=xlabel, ylabel="count")
     fig.tight_layout()
     save(fig, path)
+
+
+def cloud_grid(items: list[tuple[str, np.ndarray, np.ndarray | None]], path: str | Path,
+               ncols: int = 4, elev: float = 15.0, azim: float = -60.0) -> None:
+    """3D scatter panels: (title, points (N, 3), values (N,) or None → one colour)."""
+    nrows = max(1, -(-len(items) // ncols))
+    fig = plt.figure(figsize=(3.0 * ncols, 3.0 * nrows))
+    for k, (title, pts, values) in enumerate(items):
+        ax = fig.add_subplot(nrows, ncols, k + 1, projection="3d")
+        if values is None:
+            ax.scatter(*pts.T, s=1.5, color="tab:blue", depthshade=False)
+        else:
+            ax.scatter(*pts.T, s=2.0, c=values, cmap="inferno", vmin=0, vmax=1, depthshade=False)
+        lo, hi = pts.min(0), pts.max(0)
+        c, half = (lo + hi) / 2, (hi - lo).max() / 2 + 1e-3
+        ax.set(xlim=(c[0] - half, c[0] + half), ylim=(c[1] - half, c[1] + half),
+               zlim=(c[2] - half, c[2] + half))
+        ax.set_box_aspect((1, 1, 1))
+        ax.view_init(elev=elev, azim=azim)
+        ax.set_axis_off()
+        ax.set_title(title, fontsize=8)
+    fig.tight_layout()
+    save(fig, path)
+
+
+def scatter_2d(xy: np.ndarray, labels: np.ndarray, path: str | Path, title: str,
+               highlight: np.ndarray | None = None) -> None:
+    """Points coloured by label; ``highlight`` (K, 2) drawn as black crosses."""
+    fig, ax = plt.subplots(figsize=(5, 4))
+    sc = ax.scatter(xy[:, 0], xy[:, 1], c=labels, cmap="tab10", s=10)
+    if highlight is not None:
+        ax.scatter(highlight[:, 0], highlight[:, 1], marker="x", color="black", s=60)
+    ax.legend(*sc.legend_elements(), fontsize=7, title="cluster")
+    ax.set(title=title, xlabel="PC 1", ylabel="PC 2")
+    fig.tight_layout()
+    save(fig, path)

@@ -99,3 +99,19 @@ def log_axes(rec: rr.RecordingStream, entity: str, origin, rotation, length: flo
 def log_strip(rec: rr.RecordingStream, entity: str, points, rgb=(40, 110, 230)) -> None:
     """A static polyline (e.g. an SKT's keypoint path)."""
     rec.log(entity, rr.LineStrips3D([np.asarray(points)], colors=[rgb], radii=0.0008), static=True)
+
+
+def log_camera(rec: rr.RecordingStream, entity: str, pose: np.ndarray, width: int, height: int,
+               fov_deg: float) -> None:
+    """A pinhole camera frustum at ``pose`` (camera-to-parent, OpenCV axes)."""
+    log_pose(rec, entity, np.asarray(pose, dtype=np.float64))
+    focal = float(0.5 * height / np.tan(np.radians(fov_deg) / 2))
+    rec.log(entity, rr.Pinhole(focal_length=focal, width=width, height=height,
+                               camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=0.03),
+            static=True)
+
+
+def log_colored_points(rec: rr.RecordingStream, entity: str, points, colors,
+                       radius: float = 0.0008) -> None:
+    """Static points with per-point RGB colours (uint8 (N, 3))."""
+    rec.log(entity, rr.Points3D(np.asarray(points), colors=colors, radii=radius), static=True)

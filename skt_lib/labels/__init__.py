@@ -1,0 +1,1 @@
+"""Training labels: affordance maps and SKT template families."""

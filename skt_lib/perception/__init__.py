@@ -1,0 +1,1 @@
+"""Partial point clouds of supporting items: cameras, depth rendering, farthest-point sampling."""
