@@ -22,7 +22,7 @@ from skt_lib.seeding import item_rng
 from stages._common import parse_args
 from viz.figures import Panel, mesh_gallery, scatter_2d
 from viz.report import Report, write_metrics
-from viz.rerun_log import log_strip, recording
+from viz.rerun_log import log_scatter_2d, log_strip, recording
 
 log = logging.getLogger("clustering")
 
@@ -58,6 +58,9 @@ def main(argv=None) -> int:
     with recording("clustering", out / "clustering.rrd", "clustering: templates") as rec:
         for j, t in enumerate(fam.templates):
             log_strip(rec, f"world/templates/{j}", t + [0.0, 0.15 * j, 0.0])
+        log_scatter_2d(rec, "plots/pca/skts", fam.train_xy, fam.train_labels)
+        log_scatter_2d(rec, "plots/pca/centres", fam.centres, np.arange(p.k),
+                       labels=[f"family {j}" for j in range(p.k)])
     report = Report("clustering", rep)
     report.text(f"{metrics['n_train_skts']} SKTs of {len(train)} training supports, T = {p.T}, "
                 f"k = {p.k}; cluster sizes {sizes}; silhouette {fam.silhouette:.3f}. Templates from "

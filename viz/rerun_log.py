@@ -115,3 +115,9 @@ def log_colored_points(rec: rr.RecordingStream, entity: str, points, colors,
                        radius: float = 0.0008) -> None:
     """Static points with per-point RGB colours (uint8 (N, 3))."""
     rec.log(entity, rr.Points3D(np.asarray(points), colors=colors, radii=radius), static=True)
+
+
+def log_scatter_2d(rec: rr.RecordingStream, entity: str, xy, class_ids, labels=None) -> None:
+    """A static 2D scatter (e.g. ``plots/pca``) coloured by class id."""
+    rec.log(entity, rr.Points2D(np.asarray(xy), class_ids=np.asarray(class_ids), radii=0.02,
+                                labels=labels), static=True)
