@@ -177,6 +177,15 @@ class ClusteringParams(_Section):
     max_iter: int = Field(ge=1, le=10000, description="Lloyd iterations per restart.")
 
 
+class TrainParams(_Section):
+    epochs: int = Field(ge=1, le=10000, description="Training epochs.")
+    views_per_epoch: int = Field(ge=1, le=1000, description="Random views per training support per epoch.")
+    batch_size: int = Field(ge=1, le=1024, description="Clouds per step.")
+    lr: float = Field(gt=0.0, le=1.0, description="Adam learning rate.")
+    weight_decay: float = Field(ge=0.0, le=1.0, description="Adam weight decay.")
+    val_views: tuple[int, ...] = Field(min_length=1, description="Views of each val support evaluated.")
+
+
 class Params(_Section):
     common: CommonParams
     compute: ComputeParams
@@ -187,6 +196,7 @@ class Params(_Section):
     render_views: RenderViewsParams
     affordance_maps: AffordanceMapsParams
     clustering: ClusteringParams
+    train: TrainParams
 
 
 def _format_error(source: str, err: ValidationError) -> str:

@@ -9,7 +9,8 @@ Runs on the artifacts of ``make repro`` with the committed params and merges its
 - ``rrt_recheck_s_median``: median re-check time per SKT;
 - ``render_ms_per_view_median``: ray casting of one 320×240 view (Open3D), and
   ``render_total_ms_per_view_median``: the whole view (ray casting, FPS to N, shuffle,
-  NPZ write share), over the same sample of supports, one process.
+  NPZ write share), over the same sample of supports, one process;
+- ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded.
 Medians, because these machines are noisy.
 """
 
@@ -24,8 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from skt_lib.config import LEVELS, load_params
-from skt_lib.io import read_table, write_json_atomic
-from skt_lib.perception.views import RenderTask, render_support
+from skt_lib.io import read_npz, read_table, write_json_atomic
+from skt_lib.learning.predictor import SktPredictor
+from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
 from skt_lib.planning.skts import SktTask, plan_support_skts
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
 from stages._common import run_items
@@ -75,6 +77,20 @@ def render_bench(params, root: Path, per_level: int, tmp: Path) -> dict:
             "render_total_ms_per_view_median": float(np.median(total_ms))}
 
 
+def sctdn_bench(root: Path, n: int = 50) -> dict:
+    """SCTDN inference, batch 1, N points in → SKT out, model loaded, one process."""
+    predictor = SktPredictor.load(root / "train")
+    clouds = [read_npz(f, RENDER_SPEC)["points"] for f in sorted((root / "render_views").glob("*.npz"))[:5]]
+    views = [c[v] for c in clouds for v in range(0, c.shape[0], 4)][:n]
+    predictor.predict(views[0])  # warm-up
+    times = []
+    for cloud in views:
+        t0 = time.perf_counter()
+        predictor.predict(cloud)
+        times.append(time.perf_counter() - t0)
+    return {"sctdn_inference_ms_median": 1000 * float(np.median(times))}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="stages.bench", description=__doc__.splitlines()[0])
     ap.add_argument("--params", default="params.yaml")
@@ -86,6 +102,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     bench = json.loads(out.read_text()) if out.is_file() else {}
     bench.update(rrt_bench(params, Path(args.data_root), args.per_level))
+    bench.update(sctdn_bench(Path(args.data_root)))
     with tempfile.TemporaryDirectory() as tmp:
         bench.update(render_bench(params, Path(args.data_root), args.per_level, Path(tmp)))
     bench["machine"] = f"{platform.machine()}, {__import__('os').cpu_count()} cores, {params.compute.n_workers} workers"

@@ -25,6 +25,7 @@ TINY = {
     "render_views": {'n_azimuth': 7, 'n_elevation': 6, 'azimuth_deg': [-60.0, 60.0], 'elevation_deg': [-20.0, 55.0], 'distance_m': 0.35, 'fov_deg': 40.0, 'width': 320, 'height': 240, 'n_points': 1000, 'noise_std_m': 0.0},
     "affordance_maps": {'sigma_m': 0.005, 'alpha': 0.5, 'beta': 0.5, 'hanging_part_m': 0.03, 'visible_tol_m': 0.005},
     "clustering": {'T': 10, 'k': 3, 'n_init': 10, 'max_iter': 300},
+    "train": {'epochs': 1, 'views_per_epoch': 1, 'batch_size': 16, 'lr': 0.001, 'weight_decay': 0.0001, 'val_views': [0]},
     "rrt_skts": {'n_skts_per_support': 1, 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'start_rot_deg': 20.0, 'max_start_tries': 100, 'range_m': 0.05, 'check_step_m': 0.0015, 'planner_clearance_m': 0.0002, 'max_checks': 40000, 'simplify_steps': 60, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
 }
 
@@ -58,7 +59,7 @@ def tiny_dataset(tmp_path_factory):
     Returns (params path, data root, reports root)."""
     from stages import (
         affordance_maps, clustering, contact_sim, mesh_gen, render_views, rotation_extraction,
-        rrt_skts,
+        rrt_skts, train,
     )
 
     root = tmp_path_factory.mktemp("tiny")
@@ -66,7 +67,7 @@ def tiny_dataset(tmp_path_factory):
     params.write_text(yaml.safe_dump(TINY))
     data, reports = root / "data", root / "reports"
     for stage in (mesh_gen, contact_sim, rotation_extraction, rrt_skts, render_views,
-                  affordance_maps, clustering):
+                  affordance_maps, clustering, train):
         name = stage.__name__.rsplit(".", 1)[-1]
         assert stage.main(["--params", str(params), "--data-root", str(data),
                            "--data-dir", str(data / name), "--reports-dir", str(reports / name)]) == 0

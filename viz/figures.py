@@ -126,3 +126,14 @@ def scatter_2d(xy: np.ndarray, labels: np.ndarray, path: str | Path, title: str,
     ax.set(title=title, xlabel="PC 1", ylabel="PC 2")
     fig.tight_layout()
     save(fig, path)
+
+
+def curves(history: list[dict], keys: list[str], path: str | Path, title: str, ylabel: str) -> None:
+    """Per-epoch curves of ``keys`` from a list of metric dicts."""
+    fig, ax = plt.subplots(figsize=(5.5, 3.2))
+    for key in keys:
+        ax.plot([h[key] for h in history], label=key)
+    ax.set(title=title, xlabel="epoch", ylabel=ylabel)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    save(fig, path)

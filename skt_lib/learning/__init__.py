@@ -1,0 +1,1 @@
+"""Learning: pure-PyTorch PointNet++, SCTDN, datasets and the public predictor."""

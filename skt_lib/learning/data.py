@@ -1,0 +1,48 @@
+"""Training and evaluation arrays from the pipeline's artifacts, one entry per support."""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from skt_lib.io import read_npz, read_table
+from skt_lib.perception.views import RENDER_SPEC
+from skt_lib.planning.trajectory import resample
+from skt_lib.schemas import CONTACTS, LABELS, SKTS
+
+AFF_SPEC = {"affordance": ("float32", 2)}
+
+
+@dataclass(frozen=True, eq=False)
+class SupportData:
+    support_id: str
+    split: str
+    family: int
+    points: np.ndarray  # (V, N, 3) float32, support frame
+    affordance: np.ndarray  # (V, N) float32
+    skts: np.ndarray  # (G, T, 3) float64 ground-truth SKTs resampled to T, ξ_0 first
+    contact: np.ndarray  # (3,) support contact point
+
+
+def load_supports(root: Path, T: int) -> list[SupportData]:
+    labels = read_table(root / "clustering" / "labels.parquet", LABELS)
+    skts = read_table(root / "rrt_skts" / "skts.parquet", SKTS)
+    contacts = read_table(root / "contact_sim" / "contacts.parquet", CONTACTS)
+    contacts = contacts[contacts["kind"] == "reference_on_support"].set_index("item_id")
+    by_support = {sid: g.sort_values("skt_index") for sid, g in skts.groupby("support_id")}
+    out = []
+    for row in labels.itertuples():
+        cloud = read_npz(root / "render_views" / f"{row.support_id}.npz", RENDER_SPEC)
+        aff = read_npz(root / "affordance_maps" / f"{row.support_id}.npz", AFF_SPEC)
+        gt = np.stack([resample(np.stack(k), T) for k in by_support[row.support_id]["keypoints"]])
+        out.append(SupportData(row.support_id, row.split, int(row.category), cloud["points"],
+                               aff["affordance"], gt,
+                               np.asarray(contacts.loc[row.support_id, "contact_support"])))
+    return out
+
+
+def normalise(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(normalised points, centroid (…, 3), scale (…)) per cloud ``(..., N, 3)``."""
+    c = points.mean(-2, keepdims=True)
+    s = np.linalg.norm(points - c, axis=-1).max(-1)
+    return (points - c) / s[..., None, None], c[..., 0, :], s

@@ -1,0 +1,73 @@
+"""The public predictor: a partial cloud of a supporting item in, an SKT out.
+
+    from skt_lib.learning.predictor import SktPredictor
+    p = SktPredictor.load("data/train")
+    skt = p.predict(points)  # points: (N, 3) float, support frame, metres
+
+Checkpoints are a ``state_dict`` (``sctdn.pt``, loaded with ``weights_only=True``) plus a
+JSON config (``sctdn.json``); no pickled objects.
+"""
+
+import pickle
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from skt_lib.errors import DataError
+from skt_lib.learning.data import normalise
+from skt_lib.learning.sctdn import Sctdn, SctdnConfig
+from skt_lib.perception.pointcloud import check_cloud, farthest_point_sample
+from skt_lib.planning.trajectory import skt_frames
+
+
+@dataclass(frozen=True, eq=False)
+class Skt:
+    positions: np.ndarray  # (T, 3) support frame, ξ_0 (hang) first
+    frames: np.ndarray  # (T, 4, 4) SE(3) waypoints by the SKT rule
+    family: int
+    contact: np.ndarray  # (3,) predicted contact point
+    affordance: np.ndarray  # (N,) per input point (after resampling to n_points)
+
+
+class SktPredictor:
+    def __init__(self, model: Sctdn):
+        self.model = model.eval()
+        self.cfg = model.cfg
+
+    @classmethod
+    def load(cls, directory: str | Path) -> "SktPredictor":
+        d = Path(directory)
+        try:
+            cfg = SctdnConfig.from_json((d / "sctdn.json").read_text())
+            state = torch.load(d / "sctdn.pt", map_location="cpu", weights_only=True)
+            model = Sctdn(cfg, state["templates"])
+            model.load_state_dict(state)
+        except (OSError, ValueError, TypeError, KeyError, RuntimeError, pickle.UnpicklingError) as err:
+            raise DataError(f"{d}: cannot load the SCTDN checkpoint: {str(err)[:200]}") from None
+        return cls(model)
+
+    def save(self, directory: str | Path) -> None:
+        from skt_lib.io import atomic_path, write_text_atomic
+
+        d = Path(directory)
+        d.mkdir(parents=True, exist_ok=True)
+        with atomic_path(d / "sctdn.pt") as tmp:
+            torch.save(self.model.state_dict(), tmp)
+        write_text_atomic(d / "sctdn.json", self.cfg.to_json() + "\n")
+
+    @torch.no_grad()
+    def predict(self, points: np.ndarray) -> Skt:
+        pts = check_cloud(points, "points")
+        if len(pts) != self.cfg.n_points:
+            if len(pts) < self.cfg.n_points:
+                raise ValueError(f"points: need at least {self.cfg.n_points}, got {len(pts)}")
+            pts = pts[farthest_point_sample(pts, self.cfg.n_points)]
+        xyz_n, c, s = normalise(pts)
+        out = self.model(torch.as_tensor(xyz_n[None], dtype=torch.float32),
+                         torch.as_tensor([s], dtype=torch.float32))
+        positions = out["trajectory"][0].double().numpy() * s + c
+        aff = out["affordance"][0].numpy()
+        return Skt(positions, skt_frames(positions), int(out["logits"][0].argmax()),
+                   pts[int(aff.argmax())], aff)

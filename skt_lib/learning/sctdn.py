@@ -1,0 +1,99 @@
+"""SCTDN (paper §V-B): classify the support's template family, predict its affordance map,
+align the family's template at the predicted contact point and deform it with
+shape-conditioned features.
+
+Inputs are normalised clouds: ``xyz_n = (xyz − centroid) / scale`` with ``scale`` the max
+point radius, per cloud. Templates are stored in metres relative to ξ_0 and scaled into
+each cloud's normalised frame. Deviation from the paper: classification and segmentation
+share one PointNet++ encoder (the global feature feeds the classifier) — half the compute.
+"""
+
+import json
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from skt_lib.learning.pointnet2 import FeaturePropagation, SetAbstraction
+
+
+@dataclass(frozen=True)
+class SctdnConfig:
+    k: int
+    T: int
+    n_points: int = 1000
+    feat_dim: int = 128
+    lstm_hidden: int = 128
+    aff_threshold: float = 0.1
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2, sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> "SctdnConfig":
+        return cls(**json.loads(text))
+
+
+class Sctdn(nn.Module):
+    def __init__(self, cfg: SctdnConfig, templates: torch.Tensor):
+        super().__init__()
+        if tuple(templates.shape) != (cfg.k, cfg.T, 3):
+            raise ValueError(f"templates: expected ({cfg.k}, {cfg.T}, 3), got {tuple(templates.shape)}")
+        self.cfg = cfg
+        self.register_buffer("templates", templates.float())  # metres, relative to ξ_0
+        n = cfg.n_points  # centres per level: N/2, N/8, N/32 (1000 → 500, 125, 31)
+        self.sa1 = SetAbstraction(n // 2, 0.1, 32, [3, 32, 32, 64])
+        self.sa2 = SetAbstraction(n // 8, 0.2, 32, [64 + 3, 64, 64, 128])
+        self.sa3 = SetAbstraction(max(n // 32, 4), 0.4, 32, [128 + 3, 128, 128, 256])
+        self.sa_global = SetAbstraction(None, 0.0, 0, [256 + 3, 256, 256])
+        self.fp3 = FeaturePropagation([256 + 128, 256, 128])
+        self.fp2 = FeaturePropagation([128 + 64, 128, 128])
+        self.fp1 = FeaturePropagation([128, 128, cfg.feat_dim])
+        self.cls_head = nn.Sequential(nn.Linear(256, 128), nn.ReLU(), nn.Dropout(0.3), nn.Linear(128, cfg.k))
+        self.aff_head = nn.Conv1d(cfg.feat_dim, 1, 1)
+        self.wp_mlp = nn.Sequential(nn.Linear(3, 64), nn.ReLU(), nn.Linear(64, 32), nn.ReLU(),
+                                    nn.Linear(32, 32))
+        self.lstm = nn.LSTM(32 + cfg.feat_dim, cfg.lstm_hidden, num_layers=2, batch_first=True)
+        self.offset = nn.Linear(cfg.lstm_hidden, 3)
+        nn.init.zeros_(self.offset.weight)  # start as the aligned template: deform from there
+        nn.init.zeros_(self.offset.bias)
+
+    def forward(self, xyz_n, scale, family=None, contact_n=None) -> dict[str, torch.Tensor]:
+        """``xyz_n (B, N, 3)``, ``scale (B,)``; ``family (B,)`` and ``contact_n (B, 3)`` given
+        during training (teacher forcing), predicted when ``None``."""
+        l1_xyz, l1 = self.sa1(xyz_n, None)
+        l2_xyz, l2 = self.sa2(l1_xyz, l1)
+        l3_xyz, l3 = self.sa3(l2_xyz, l2)
+        _, g = self.sa_global(l3_xyz, l3)
+        logits = self.cls_head(g[..., 0])
+        f2 = self.fp3(l2_xyz, l3_xyz, l2, l3)
+        f1 = self.fp2(l1_xyz, l2_xyz, l1, f2)
+        feats = self.fp1(xyz_n, l1_xyz, None, f1)  # (B, C, N)
+        aff = torch.sigmoid(self.aff_head(feats))[:, 0]  # (B, N)
+        if family is None:
+            family = logits.argmax(-1)
+        if contact_n is None:
+            contact_n = xyz_n[torch.arange(len(xyz_n)), aff.argmax(-1)]
+        aligned = contact_n[:, None] + self.templates[family] / scale[:, None, None]
+        mask = (aff > self.cfg.aff_threshold).float()
+        mask = torch.where(mask.sum(-1, keepdim=True) > 0, mask, torch.ones_like(mask))
+        shape = (feats + (mask[:, None] - 1) * 1e4).max(-1).values  # masked max-pool
+        x = torch.cat([self.wp_mlp(aligned), shape[:, None].expand(-1, aligned.shape[1], -1)], -1)
+        traj = aligned + self.offset(self.lstm(x)[0])
+        return {"logits": logits, "affordance": aff, "aligned": aligned, "trajectory": traj}
+
+
+def traj_distance(pred: torch.Tensor, gt: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """Mean waypoint distance to the nearest ground-truth SKT: ``pred (B, T, 3)``,
+    ``gt (B, G, T, 3)``, ``valid (B, G)`` bool → ``(B,)``."""
+    d = torch.linalg.norm(pred[:, None] - gt, dim=-1).mean(-1)  # (B, G)
+    return d.masked_fill(~valid, float("inf")).min(-1).values
+
+
+def sctdn_loss(out, gt, valid, aff_label, family, w_aff: float = 0.1, w_cls: float = 0.1):
+    """L = L_T + 0.1·L_a + 0.1·L_c; cross-entropy on logits (not on softmax outputs)."""
+    l_t = traj_distance(out["trajectory"], gt, valid).mean()
+    l_a = F.mse_loss(out["affordance"], aff_label)
+    l_c = F.cross_entropy(out["logits"], family)
+    return l_t + w_aff * l_a + w_cls * l_c, {"traj": l_t.item(), "aff": l_a.item(), "cls": l_c.item()}
