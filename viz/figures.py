@@ -15,6 +15,18 @@ from skt_lib.io import atomic_path  # noqa: E402
 _LIGHT = np.array([0.4, -0.6, 0.7]) / np.linalg.norm([0.4, -0.6, 0.7])
 
 
+def _frame_3d(ax, points: np.ndarray, elev: float, azim: float, title: str) -> None:
+    """Equal-aspect cube around ``points``, no axes, a view direction and a title."""
+    lo, hi = points.min(0), points.max(0)
+    c, half = (lo + hi) / 2, (hi - lo).max() / 2 + 1e-3
+    ax.set(xlim=(c[0] - half, c[0] + half), ylim=(c[1] - half, c[1] + half),
+           zlim=(c[2] - half, c[2] + half))
+    ax.set_box_aspect((1, 1, 1))
+    ax.view_init(elev=elev, azim=azim)
+    ax.set_axis_off()
+    ax.set_title(title, fontsize=8)
+
+
 def save(fig, path: str | Path) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=90, metadata={"Software": None})
@@ -56,14 +68,7 @@ def mesh_gallery(panels: list[Panel], path: str | Path, ncols: int = 4, elev: fl
         for origin, rot in panel.frames:
             for axis, color in zip(rot.T, ("red", "green", "blue")):
                 ax.quiver(*origin, *(0.03 * axis), color=color, linewidth=1.5)
-        lo, hi = allv.min(0), allv.max(0)
-        c, half = (lo + hi) / 2, (hi - lo).max() / 2 + 1e-3
-        ax.set(xlim=(c[0] - half, c[0] + half), ylim=(c[1] - half, c[1] + half),
-               zlim=(c[2] - half, c[2] + half))
-        ax.set_box_aspect((1, 1, 1))
-        ax.view_init(elev=elev, azim=azim)
-        ax.set_axis_off()
-        ax.set_title(panel.title, fontsize=8)
+        _frame_3d(ax, allv, elev, azim, panel.title)
     fig.tight_layout()
     save(fig, path)
 
@@ -103,14 +108,7 @@ def cloud_grid(items: list[tuple[str, np.ndarray, np.ndarray | None]], path: str
             ax.scatter(*pts.T, s=1.5, color="tab:blue", depthshade=False)
         else:
             ax.scatter(*pts.T, s=2.0, c=values, cmap="inferno", vmin=0, vmax=1, depthshade=False)
-        lo, hi = pts.min(0), pts.max(0)
-        c, half = (lo + hi) / 2, (hi - lo).max() / 2 + 1e-3
-        ax.set(xlim=(c[0] - half, c[0] + half), ylim=(c[1] - half, c[1] + half),
-               zlim=(c[2] - half, c[2] + half))
-        ax.set_box_aspect((1, 1, 1))
-        ax.view_init(elev=elev, azim=azim)
-        ax.set_axis_off()
-        ax.set_title(title, fontsize=8)
+        _frame_3d(ax, pts, elev, azim, title)
     fig.tight_layout()
     save(fig, path)
 
