@@ -28,25 +28,16 @@ from skt_lib.config import LEVELS, load_params
 from skt_lib.io import read_npz, read_table, write_json_atomic
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
-from skt_lib.planning.skts import SktTask, plan_support_skts
-from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
+from skt_lib.planning.skts import load_skt_tasks, plan_support_skts
+from skt_lib.schemas import SUPPORTS
 from stages._common import run_items
 
 
 def rrt_bench(params, root: Path, per_level: int) -> dict:
-    p, mg = params.rrt_skts, root / "mesh_gen"
-    supports = read_table(mg / "supports.parquet", SUPPORTS).set_index("support_id")
-    ref = read_table(mg / "objects.parquet", OBJECTS).query("is_reference").iloc[0]
-    kp = read_table(root / "rotation_extraction" / "keypoints.parquet", KEYPOINTS).query("is_reference")
-    hangs = read_table(root / "contact_sim" / "contacts.parquet", CONTACTS)
-    hangs = hangs[(hangs["kind"] == "reference_on_support") & hangs["ok"]]
-    chosen = [sid for lv in LEVELS
-              for sid in [s for s in hangs["support_id"] if supports.loc[s, "difficulty"] == lv][:per_level]]
-    hangs = hangs.set_index("support_id")
-    tasks = [SktTask(s, str(mg / supports.loc[s, "urdf_path"]), str(mg / supports.loc[s, "mesh_path"]),
-                     str(mg / ref["urdf_path"]), str(mg / ref["mesh_path"]), tuple(kp.iloc[0]["position"]),
-                     tuple(hangs.loc[s, "hang_position"]), tuple(hangs.loc[s, "hang_quat"]),
-                     params.common.seed, p) for s in chosen]
+    supports = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")
+    all_tasks = load_skt_tasks(root, params.common.seed, params.rrt_skts)
+    tasks = [t for lv in LEVELS
+             for t in [t for t in all_tasks if supports.loc[t.support_id, "difficulty"] == lv][:per_level]]
     t0 = time.perf_counter()
     results, _, _ = run_items(plan_support_skts, tasks, params.compute, "bench rrt")
     wall = time.perf_counter() - t0

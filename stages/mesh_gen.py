@@ -77,9 +77,11 @@ def main(argv=None) -> int:
     meshes = {r.get("support_id", r.get("object_id")): read_obj(out / r["mesh_path"])[0]
               for r in supports + objects}
     with recording("mesh_gen", out / "mesh_gen.rrd", "mesh_gen: supports and objects") as rec:
+        column: Counter = Counter()
         for s in supports:
             m, row = meshes[s["support_id"]], LEVELS.index(s["difficulty"])
-            col = sum(1 for q in supports[: supports.index(s)] if q["difficulty"] == s["difficulty"])
+            col = column[s["difficulty"]]
+            column[s["difficulty"]] += 1
             log_mesh(rec, support_path(s["support_id"]), m.vertices, m.faces, SUPPORT_RGBA,
                      (0.25 * row, 0.25 * col, 0.0), family=s["family"],
                      difficulty=s["difficulty"], split=s["split"])

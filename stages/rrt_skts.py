@@ -16,14 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from skt_lib.config import LEVELS, load_params
-from skt_lib.errors import DataError
 from skt_lib.geometry.build import OBJECT_RGBA, SUPPORT_RGBA
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import matrix_pose, pose_matrix
 from skt_lib.io import read_table, write_table
-from skt_lib.planning.skts import SktTask, plan_support_skts
+from skt_lib.planning.skts import load_skt_tasks, plan_support_skts
 from skt_lib.planning.trajectory import arc_length, resample, skt_frames
-from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SKTS, SUPPORTS
+from skt_lib.schemas import OBJECTS, SKTS, SUPPORTS
 from stages._common import parse_args, run_items
 from viz.figures import Panel, histogram, mesh_gallery
 from viz.report import Report, write_metrics
@@ -38,19 +37,10 @@ def main(argv=None) -> int:
     p, seed = params.rrt_skts, params.common.seed
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     supports = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")
-    objects = read_table(root / "mesh_gen" / "objects.parquet", OBJECTS)
-    contacts = read_table(root / "contact_sim" / "contacts.parquet", CONTACTS)
-    keypoints = read_table(root / "rotation_extraction" / "keypoints.parquet", KEYPOINTS)
-    ref, ref_kp = objects[objects["is_reference"]].iloc[0], keypoints[keypoints["is_reference"]]
-    if ref_kp.empty:
-        raise DataError("keypoints.parquet: the reference object has no keypoint")
-    kp = tuple(ref_kp.iloc[0]["position"])
-    hangs = contacts[(contacts["kind"] == "reference_on_support") & contacts["ok"]]
+    ref = read_table(root / "mesh_gen" / "objects.parquet", OBJECTS).query("is_reference").iloc[0]
+    tasks = load_skt_tasks(root, seed, p)
+    kp = np.asarray(tasks[0].keypoint) if tasks else np.zeros(3)
     mg = root / "mesh_gen"
-    tasks = [SktTask(h.support_id, str(mg / supports.loc[h.support_id, "urdf_path"]),
-                     str(mg / supports.loc[h.support_id, "mesh_path"]), str(mg / ref.urdf_path),
-                     str(mg / ref.mesh_path), kp, tuple(h.hang_position), tuple(h.hang_quat), seed, p)
-             for h in hangs.itertuples()]
     t0 = time.perf_counter()
     results, _, _ = run_items(plan_support_skts, tasks, params.compute, "supports")
     wall = time.perf_counter() - t0

@@ -49,8 +49,7 @@ def aperture_clearance(parts: tuple[Mesh, ...] | list[Mesh]) -> float:
     for part in parts:
         yz = part.vertices[:, 1:]
         h = ConvexHull(yz)
-        normals, offsets = h.equations[:, :2], h.equations[:, 2]
-        if (offsets <= 0).all():  # origin inside the projected polygon (n·0 + d <= 0)
+        if (h.equations[:, 2] <= 0).all():  # origin inside the projected polygon (n·0 + d <= 0)
             return 0.0
         poly = yz[h.vertices]
         a, b = poly, np.roll(poly, -1, axis=0)

@@ -1,7 +1,5 @@
 """Train/val/test split by supporting item, balanced per difficulty level in val and test."""
 
-import numpy as np
-
 from skt_lib.config import LEVELS
 from skt_lib.errors import GenerationFailed
 from skt_lib.seeding import item_rng

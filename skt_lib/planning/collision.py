@@ -15,7 +15,6 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from skt_lib.geometry.convex import Mesh
-from skt_lib.geometry.se3 import transform_points
 from skt_lib.sim.world import World
 
 

@@ -10,16 +10,20 @@ hanging orientation by a random rotation of at most ``start_rot_deg``.
 import time
 from collections import Counter
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from skt_lib.config import RrtSktsParams
+from skt_lib.errors import DataError
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import matrix_pose, pose_matrix, random_rotation_small
+from skt_lib.io import read_table
 from skt_lib.parallel import run_forked
 from skt_lib.planning.collision import MeshClearance, make_collision_fn
 from skt_lib.planning.ompl_rrt import PlanningFailed, PlanSettings, plan, seed_ompl
 from skt_lib.planning.trajectory import keypoint_positions, max_point_step
+from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from skt_lib.sim.world import World
 
@@ -38,6 +42,26 @@ class SktTask:
     goal_quat: tuple[float, float, float, float]  # xyzw
     seed: int
     params: RrtSktsParams
+
+
+def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams) -> list[SktTask]:
+    """One task per support with a hanging pose, from the artifacts under ``root`` (the
+    ``data/`` folder): mesh_gen, contact_sim and rotation_extraction outputs."""
+    mg = root / "mesh_gen"
+    supports = read_table(mg / "supports.parquet", SUPPORTS).set_index("support_id")
+    objects = read_table(mg / "objects.parquet", OBJECTS)
+    contacts = read_table(root / "contact_sim" / "contacts.parquet", CONTACTS)
+    keypoints = read_table(root / "rotation_extraction" / "keypoints.parquet", KEYPOINTS)
+    ref, ref_kp = objects[objects["is_reference"]].iloc[0], keypoints[keypoints["is_reference"]]
+    if ref_kp.empty:
+        raise DataError(f"{root / 'rotation_extraction' / 'keypoints.parquet'}: the reference "
+                        "object has no keypoint")
+    kp = tuple(ref_kp.iloc[0]["position"])
+    hangs = contacts[(contacts["kind"] == "reference_on_support") & contacts["ok"]]
+    return [SktTask(h.support_id, str(mg / supports.loc[h.support_id, "urdf_path"]),
+                    str(mg / supports.loc[h.support_id, "mesh_path"]), str(mg / ref.urdf_path),
+                    str(mg / ref.mesh_path), kp, tuple(h.hang_position), tuple(h.hang_quat), seed, p)
+            for h in hangs.itertuples()]
 
 
 def settings(p: RrtSktsParams, object_radius: float) -> PlanSettings:

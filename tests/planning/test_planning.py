@@ -5,7 +5,7 @@ import pytest
 
 from skt_lib.geometry.convex import box, union
 from skt_lib.geometry.export import write_shape
-from skt_lib.geometry.se3 import pose_matrix, skt_rotation
+from skt_lib.geometry.se3 import matrix_pose, pose_matrix, skt_rotation
 from skt_lib.parallel import run_forked
 from skt_lib.planning.collision import MeshClearance, make_collision_fn
 from skt_lib.planning.ompl_rrt import PlanningFailed, PlanSettings, densify, plan, seed_ompl
@@ -43,14 +43,8 @@ def _plan_in_scene(args):
         settings = SETTINGS if max_checks is None else SETTINGS.__class__(
             **{**SETTINGS.__dict__, "max_checks": max_checks})
         poses, _ = plan(start, goal, collides, LOWER, UPPER, settings)
-        flags = [collides(*(t[:3, 3], _quat(t))) for t in poses]
+        flags = [collides(*matrix_pose(t)) for t in poses]
         return poses, flags, MeshClearance(obstacle, cube, 0.002).clearance(poses)
-
-
-def _quat(t):
-    from skt_lib.geometry.se3 import matrix_to_quat
-
-    return matrix_to_quat(t[:3, :3])
 
 
 def test_narrow_passage_is_solved_and_rechecked(tmp_path):
