@@ -118,3 +118,23 @@ LABELS = TableSchema(
         "is_template": pa.bool_(),
     },
 )
+
+TRIALS = TableSchema(
+    "trials",
+    1,
+    {
+        "trial_id": pa.string(),
+        "method": pa.string(),
+        "support_id": pa.string(),
+        "object_id": pa.string(),
+        "difficulty": pa.string(),
+        "category": pa.string(),
+        "success": pa.bool_(),
+        "failure_reason": pa.string(),
+        "n_commands": pa.int32(),
+        "n_executed": pa.int32(),
+        "max_track_err_m": pa.float64(),
+        "touched_support": pa.bool_(),
+        "blocked_by": pa.string(),
+    },
+)

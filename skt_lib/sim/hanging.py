@@ -33,13 +33,18 @@ class HangCheck:
     contact_object: np.ndarray | None = None  # the same point in the object's link frame (3,)
 
 
-def perturb(world: World, p: Perturbation) -> None:
+def perturb_phases(p: Perturbation) -> list[tuple[tuple[float, float, float], int]]:
+    """(gravity in the support frame, steps) per phase; the last one restores normal gravity."""
     a = p.accel_m_s2
-    for g in ((0.0, a, -G), (0.0, -a, -G), (a, 0.0, -G)):
-        world.set_gravity_support(g)
-        world.step(p.steps_per_direction)
-    world.set_gravity_support((0.0, 0.0, -G))
-    world.step(p.settle_steps)
+    tilted = [((0.0, a, -G), p.steps_per_direction), ((0.0, -a, -G), p.steps_per_direction),
+              ((a, 0.0, -G), p.steps_per_direction)]
+    return tilted + [((0.0, 0.0, -G), p.settle_steps)]
+
+
+def perturb(world: World, p: Perturbation) -> None:
+    for gravity, steps in perturb_phases(p):
+        world.set_gravity_support(gravity)
+        world.step(steps)
 
 
 def supporting_cluster(points: np.ndarray, forces: np.ndarray, radius: float = 0.005) -> np.ndarray:
