@@ -186,6 +186,29 @@ class TrainParams(_Section):
     val_views: tuple[int, ...] = Field(min_length=1, description="Views of each val support evaluated.")
 
 
+class SimEvalParams(_Section):
+    methods: tuple[Literal["oracle", "template_only", "sctdn", "kpam"], ...] = Field(
+        min_length=1, description="Methods evaluated (Table I rows).")
+    robot_base_m: tuple[float, float, float] = Field(description="World position of the Panda base.")
+    grasp_pitch_deg: float = Field(ge=-60.0, le=60.0, description="Approach axis pitched down from keypoint +x.")
+    step_m: float = Field(gt=0.0, le=0.002, description="Max object-point motion per command (≤ 2 mm).")
+    steps_per_command: int = Field(ge=1, le=100, description="Physics steps per joint command.")
+    hold_steps: int = Field(ge=0, le=10000, description="Steps holding ξ_0 before the release.")
+    track_tol_m: float = Field(gt=0.0, le=0.1, description="Keypoint tracking error that ends a trial.")
+    ik_tol_m: float = Field(gt=0.0, le=0.02, description="Set-up IK: accepted position error.")
+    ik_tol_rad: float = Field(gt=0.0, le=0.2, description="Set-up IK: accepted rotation error.")
+    max_joint_step_rad: float = Field(gt=0.0, le=1.0, description="Set-up IK: max joint change per command.")
+    ik_restarts: int = Field(ge=1, le=100, description="Set-up IK: start configurations tried.")
+    grasp_force_n: float = Field(gt=0.0, le=1000.0, description="Force limit of the rigid hold.")
+    retreat_m: float = Field(ge=0.0, le=0.3, description="Retreat of the open hand toward the robot.")
+    retreat_steps: int = Field(ge=1, le=10000, description="Steps of the retreat.")
+    kpam_pre_hang_m: tuple[float, float, float] = Field(
+        description="kPAM baseline: pre-hang keypoint offset from the hang (support frame).")
+    kpam_lift_m: float = Field(ge=0.0, le=0.05, description="kPAM baseline: release this high above the hang.")
+    n_record: int = Field(ge=0, le=100, description="Rollouts per method recorded to Rerun.")
+    record_every: int = Field(ge=1, le=1000, description="Physics steps between recorded frames.")
+
+
 class Params(_Section):
     common: CommonParams
     compute: ComputeParams
@@ -197,6 +220,7 @@ class Params(_Section):
     affordance_maps: AffordanceMapsParams
     clustering: ClusteringParams
     train: TrainParams
+    sim_eval: SimEvalParams
 
 
 def _format_error(source: str, err: ValidationError) -> str:

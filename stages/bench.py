@@ -10,7 +10,9 @@ Runs on the artifacts of ``make repro`` with the committed params and merges its
 - ``render_ms_per_view_median``: ray casting of one 320×240 view (Open3D), and
   ``render_total_ms_per_view_median``: the whole view (ray casting, FPS to N, shuffle,
   NPZ write share), over the same sample of supports, one process;
-- ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded.
+- ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded;
+- ``sim_trials_per_min``: sim_eval trials (Panda, oracle SKTs, every test object) per minute
+  of wall time on ``compute.n_workers`` workers, over ``per_level`` test supports per level.
 Medians, because these machines are noisy.
 """
 
@@ -25,11 +27,14 @@ from pathlib import Path
 import numpy as np
 
 from skt_lib.config import LEVELS, load_params
+from skt_lib.eval.methods import make_method
+from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
 from skt_lib.io import read_npz, read_table, write_json_atomic
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
 from skt_lib.planning.skts import load_skt_tasks, plan_support_skts
 from skt_lib.schemas import SUPPORTS
+from skt_lib.sim.execute import run_trial
 from stages._common import run_items
 
 
@@ -82,6 +87,20 @@ def sctdn_bench(root: Path, n: int = 50) -> dict:
     return {"sctdn_inference_ms_median": 1000 * float(np.median(times))}
 
 
+def sim_bench(params, root: Path, per_level: int) -> dict:
+    p = params.sim_eval
+    supports, objects, _ = load_test_set(root, params.clustering.T, params.common.seed, p.grasp_pitch_deg)
+    chosen = [s for lv in LEVELS for s in [s for s in supports if s.difficulty == lv][:per_level]]
+    settings = trial_settings(p, params.contact_sim)
+    pre = np.asarray(p.kpam_pre_hang_m)
+    tasks = [make_task("oracle", s, o, make_method("oracle", None, s.gt, pre).predict(s.cloud).positions,
+                       settings) for s in chosen for o in objects]
+    t0 = time.perf_counter()
+    run_items(run_trial, tasks, params.compute, "bench sim")
+    wall = time.perf_counter() - t0
+    return {"sim_trials_per_min": 60.0 * len(tasks) / wall, "sim_bench_trials": len(tasks)}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="stages.bench", description=__doc__.splitlines()[0])
     ap.add_argument("--params", default="params.yaml")
@@ -94,6 +113,7 @@ def main(argv=None) -> int:
     bench = json.loads(out.read_text()) if out.is_file() else {}
     bench.update(rrt_bench(params, Path(args.data_root), args.per_level))
     bench.update(sctdn_bench(Path(args.data_root)))
+    bench.update(sim_bench(params, Path(args.data_root), args.per_level))
     with tempfile.TemporaryDirectory() as tmp:
         bench.update(render_bench(params, Path(args.data_root), args.per_level, Path(tmp)))
     bench["machine"] = f"{platform.machine()}, {__import__('os').cpu_count()} cores, {params.compute.n_workers} workers"

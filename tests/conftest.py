@@ -26,6 +26,12 @@ TINY = {
     "affordance_maps": {'sigma_m': 0.005, 'alpha': 0.5, 'beta': 0.5, 'hanging_part_m': 0.03, 'visible_tol_m': 0.005},
     "clustering": {'T': 10, 'k': 3, 'n_init': 10, 'max_iter': 300},
     "train": {'epochs': 1, 'views_per_epoch': 1, 'batch_size': 16, 'lr': 0.001, 'weight_decay': 0.0001, 'val_views': [0]},
+    "sim_eval": {"methods": ["oracle", "template_only", "sctdn", "kpam"], "robot_base_m": [0.05, 0.0, 0.3],
+                 "grasp_pitch_deg": 0.0, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,
+                 "track_tol_m": 0.02, "ik_tol_m": 0.002, "ik_tol_rad": 0.02, "max_joint_step_rad": 0.2,
+                 "ik_restarts": 12, "grasp_force_n": 60.0, "retreat_m": 0.08, "retreat_steps": 60,
+                 "kpam_pre_hang_m": [0.1, 0.0, 0.0], "kpam_lift_m": 0.01,
+                 "n_record": 1, "record_every": 16},
     "rrt_skts": {'n_skts_per_support': 1, 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'start_rot_deg': 20.0, 'max_start_tries': 100, 'range_m': 0.05, 'check_step_m': 0.0015, 'planner_clearance_m': 0.0002, 'max_checks': 40000, 'simplify_steps': 60, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
 }
 

@@ -58,7 +58,9 @@ class SktPredictor:
         write_text_atomic(d / "sctdn.json", self.cfg.to_json() + "\n")
 
     @torch.no_grad()
-    def predict(self, points: np.ndarray) -> Skt:
+    def predict(self, points: np.ndarray, deform: bool = True) -> Skt:
+        """The SKT for a cloud ``(N, 3)``; ``deform=False`` returns the predicted family's
+        template aligned at the predicted contact point (the paper's template-only row)."""
         pts = check_cloud(points, "points")
         if len(pts) != self.cfg.n_points:
             if len(pts) < self.cfg.n_points:
@@ -67,7 +69,7 @@ class SktPredictor:
         xyz_n, c, s = normalise(pts)
         out = self.model(torch.as_tensor(xyz_n[None], dtype=torch.float32),
                          torch.as_tensor([s], dtype=torch.float32))
-        positions = out["trajectory"][0].double().numpy() * s + c
+        positions = out["trajectory" if deform else "aligned"][0].double().numpy() * s + c
         aff = out["affordance"][0].numpy()
         return Skt(positions, skt_frames(positions), int(out["logits"][0].argmax()),
                    pts[int(aff.argmax())], aff)
