@@ -93,12 +93,15 @@ def main(argv=None) -> int:
     chosen = _pick_rollouts(trials, p.n_record)
     _write_report(rep, trials, metrics, p.methods, supports, objects, missing, wall, chosen)
     by_id = {t.trial_id: t for t in tasks}
+    rows_by_id = {r["trial_id"]: r for r in rows}
     s_by_id, o_by_id = {s.support_id: s for s in supports}, {o.object_id: o for o in objects}
     replay = []
     for tid in chosen:
         t = by_id[tid]
         traced = run_trial(make_task(t.method, s_by_id[t.support_id], o_by_id[t.object_id],
                                      np.asarray(t.positions), settings, p.record_every))
+        if traced["row"] != rows_by_id[tid]:  # recording must not change what happened
+            raise RuntimeError(f"{tid}: the recorded replay differs from the evaluated trial")
         replay.append((t, traced))
     meshes = {sid: read_obj(s_by_id[sid].mesh)[0] for sid in {t.support_id for t, _ in replay}}
     omeshes = {oid: read_obj(o_by_id[oid].mesh)[0] for oid in {t.object_id for t, _ in replay}}

@@ -13,8 +13,8 @@ interpolated so that no point of the object moves more than ``step_m`` per comma
 
 Outcomes (``failure_reason``, empty on success):
 ``ik_failed`` (the hand cannot reach the path), ``collided_before_hang`` (the object or the
-robot is blocked by the support or wall on the way in; ``blocked_by`` says which), ``not_reached`` (released, it never
-touched the support), ``dropped`` (it touched the support, then fell), ``perched`` (resting
+robot is blocked by the support or wall on the way in; ``blocked_by`` says which),
+``not_reached`` (released, it never touched the support), ``dropped`` (it touched the support, then fell), ``perched`` (resting
 on top), ``touches_robot`` (still on or in the gripper).
 """
 

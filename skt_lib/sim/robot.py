@@ -25,10 +25,9 @@ class Panda:
     """One Panda in ``world`` with its base at ``base_world`` (4×4, world frame)."""
 
     def __init__(self, world: World, base_world: np.ndarray, ik_iterations: int = 100):
-        self.world, self.cid = world, world.cid
+        self.cid = world.cid
         pos, quat = matrix_pose(base_world)
-        self.body = pb.loadURDF(PANDA_URDF, pos, quat, useFixedBase=True,
-                                flags=pb.URDF_USE_SELF_COLLISION * 0, physicsClientId=self.cid)
+        self.body = pb.loadURDF(PANDA_URDF, pos, quat, useFixedBase=True, physicsClientId=self.cid)
         info = [pb.getJointInfo(self.body, j, physicsClientId=self.cid) for j in ARM]
         self.lower = [i[8] for i in info]
         self.upper = [i[9] for i in info]
