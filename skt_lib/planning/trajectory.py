@@ -4,7 +4,10 @@ An SKT is ``T`` waypoints ξ_0..ξ_{T-1} in the support frame, ξ_0 at the hangi
 execution runs ξ_{T-1} → ξ_0. Positions are ``(T, 3)`` float64 metres.
 """
 
+import math
+
 import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
 
 from skt_lib.geometry.se3 import skt_rotation, transform_points
 
@@ -67,3 +70,29 @@ def max_point_step(poses: np.ndarray, points: np.ndarray) -> float:
     """Largest displacement of any of ``points`` (object frame) between consecutive poses."""
     pts = np.stack([transform_points(t, points) for t in poses])
     return float(np.linalg.norm(np.diff(pts, axis=0), axis=2).max())
+
+
+def interpolate(frames: np.ndarray, step_m: float, radius_m: float) -> np.ndarray:
+    """Poses ``(M, 4, 4)`` through ``frames (T, 4, 4)`` (in execution order), adding
+    in-between poses (linear position, slerp rotation) so that no point within ``radius_m``
+    of the frame origin moves more than ``step_m`` between consecutive poses."""
+    out = [frames[0]]
+    for a, b in zip(frames[:-1], frames[1:]):
+        rel = Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).magnitude()
+        n = max(1, math.ceil((np.linalg.norm(b[:3, 3] - a[:3, 3]) + rel * radius_m) / step_m))
+        slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([a[:3, :3], b[:3, :3]])))
+        u = np.arange(1, n + 1) / n
+        seg = np.tile(np.eye(4), (n, 1, 1))
+        seg[:, :3, :3] = slerp(u).as_matrix()
+        seg[:, :3, 3] = (1 - u)[:, None] * a[:3, 3] + u[:, None] * b[:3, 3]
+        out.extend(seg)
+    return np.stack(out)
+
+
+def executed_path(positions: np.ndarray, step_m: float, radius_m: float) -> np.ndarray:
+    """The SKT as it is executed and validated: keypoint frames ``(M, 4, 4)`` in execution
+    order (ξ_{T-1} first, ξ_0 last) — :func:`skt_frames` of ``positions (T, 3)`` (ξ_0 first),
+    interpolated so that no point within ``radius_m`` of the keypoint moves more than
+    ``step_m`` per pose. ``sim_eval`` executes exactly this; ``rrt_skts`` re-checks exactly
+    this."""
+    return interpolate(skt_frames(np.asarray(positions, float))[::-1], step_m, radius_m)

@@ -18,15 +18,13 @@ robot is blocked by the support or wall on the way in; ``blocked_by`` says which
 on top), ``touches_robot`` (still on or in the gripper).
 """
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 import pybullet as pb
-from scipy.spatial.transform import Rotation, Slerp
 
 from skt_lib.geometry.se3 import invert, matrix_pose, pose_matrix, transform_points
-from skt_lib.planning.trajectory import skt_frames
+from skt_lib.planning.trajectory import executed_path
 from skt_lib.sim.hanging import Perturbation, check_hang, perturb_phases
 from skt_lib.sim.robot import FINGER_OPEN_M, GRASP_LINK, Panda
 from skt_lib.sim.world import World
@@ -86,23 +84,6 @@ def grasp_in_keypoint(vertices: np.ndarray, keypoint: np.ndarray, pitch_deg: flo
     return t
 
 
-def interpolate(frames: np.ndarray, step_m: float, radius_m: float) -> np.ndarray:
-    """Poses ``(M, 4, 4)`` through ``frames (T, 4, 4)`` (in execution order), adding
-    in-between poses (linear position, slerp rotation) so that no point within ``radius_m``
-    of the frame origin moves more than ``step_m`` between consecutive poses."""
-    out = [frames[0]]
-    for a, b in zip(frames[:-1], frames[1:]):
-        rel = Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).magnitude()
-        n = max(1, math.ceil((np.linalg.norm(b[:3, 3] - a[:3, 3]) + rel * radius_m) / step_m))
-        slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([a[:3, :3], b[:3, :3]])))
-        for s in np.arange(1, n + 1) / n:
-            t = np.eye(4)
-            t[:3, :3] = slerp(s).as_matrix()
-            t[:3, 3] = (1 - s) * a[:3, 3] + s * b[:3, 3]
-            out.append(t)
-    return np.stack(out)
-
-
 class _Trace:
     """Robot link poses and the object pose every ``every`` steps, with phase names."""
 
@@ -126,8 +107,7 @@ def run_trial(task: TrialTask) -> dict:
     s = task.settings
     keypoint = np.asarray(task.keypoint, float).reshape(4, 4)
     kpt_ee = np.asarray(task.kpt_ee, float).reshape(4, 4)
-    path = interpolate(skt_frames(np.asarray(task.positions, float))[::-1], s.step_m,
-                       task.object_radius_m)
+    path = executed_path(task.positions, s.step_m, task.object_radius_m)
     row = {"trial_id": task.trial_id, "method": task.method, "support_id": task.support_id,
            "object_id": task.object_id, **task.extra, "success": False, "failure_reason": "",
            "n_commands": len(path), "n_executed": 0, "max_track_err_m": 0.0,

@@ -6,7 +6,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from skt_lib.geometry.se3 import pose_matrix, transform_points
-from skt_lib.sim.execute import grasp_in_keypoint, interpolate
+from skt_lib.planning.trajectory import interpolate
+from skt_lib.sim.execute import grasp_in_keypoint
 from skt_lib.sim.hanging import check_hang, perturb
 from skt_lib.sim.robot import Panda
 from tests.sim.test_hanging import PERT, _ring_world, _settle_from
