@@ -47,7 +47,10 @@ class MeshGenParams(_Section):
     n_supports: int = Field(ge=4, le=5000, description="Supporting items to generate.")
     n_val_per_level: int = Field(ge=0, description="Validation supports per difficulty level.")
     n_test_per_level: int = Field(ge=1, description="Test supports per difficulty level.")
-    n_objects_per_category: int = Field(ge=1, le=100, description="Objects per category.")
+    n_objects_per_category: int = Field(ge=2, le=100, description="Objects per category.")
+    n_test_objects_per_category: int = Field(
+        ge=1, le=99, description="Test objects per category (never used to make labels); the rest train."
+    )
     support_radius_m: tuple[PositiveLength, PositiveLength] = Field(
         description="Range of the support tube's section half-width (round radius / square half-side)."
     )
@@ -74,6 +77,11 @@ class MeshGenParams(_Section):
             raise ValueError(
                 "support_radius_m: the thickest support must be thinner than object_rod_radius_m"
             )
+        if self.n_test_objects_per_category >= self.n_objects_per_category:
+            raise ValueError(
+                f"n_test_objects_per_category: {self.n_test_objects_per_category} leaves no training "
+                f"objects of {self.n_objects_per_category} per category"
+            )
         n_fixed = 4 * (self.n_val_per_level + self.n_test_per_level)
         if n_fixed >= self.n_supports:
             raise ValueError(
@@ -87,12 +95,24 @@ class PerturbationParams(_Section):
     accel_m_s2: float = Field(ge=0.0, le=9.81, description="Sideways/outward gravity tilt (DESIGN §5).")
     steps_per_direction: int = Field(ge=1, le=100000, description="Steps per tilt direction.")
     settle_steps: int = Field(ge=1, le=100000, description="Steps under normal gravity after tilting.")
+    rest_speed_m_s: float = Field(
+        gt=0.0, le=0.5, description="At rest: the object's mean centre-of-mass speed over the final window must not exceed this, m/s.")
+    rest_angular_speed_rad_s: float = Field(
+        gt=0.0, le=5.0, description="At rest: the object's mean angular speed over the final window must not exceed this, rad/s.")
+    rest_window_steps: int = Field(
+        ge=1, le=10000, description="At rest: physics steps over which the object is observed after settling.")
 
 
 class ContactSimParams(_Section):
     dt: float = Field(gt=0.0, le=0.01, description="Physics time step, s.")
     solver_iterations: int = Field(ge=1, le=1000, description="PyBullet solver iterations.")
     friction: float = Field(gt=0.0, le=2.0, description="Lateral friction of objects and supports.")
+    linear_damping: float = Field(
+        ge=0.0, le=5.0,
+        description="Linear damping rate of free objects, 1/s (PyBullet multibody: force −k·m·v): air drag; damps long objects' pendulum swing.")
+    angular_damping: float = Field(
+        ge=0.0, le=20.0,
+        description="Angular damping rate of free objects, 1/s (PyBullet multibody: torque −k·I·ω): air drag and contact losses, so a hung object stops swinging.")
     rod_radius_m: PositiveLength = Field(description="Radius of the horizontal test rod for objects.")
     n_drops: int = Field(ge=1, le=100, description="Release attempts per object / support.")
     drop_steps: int = Field(ge=1, le=100000, description="Steps under gravity after release.")
@@ -119,16 +139,22 @@ class RrtSktsParams(_Section):
     start_dx_m: tuple[float, float] = Field(description="Start keypoint offset range toward the robot.")
     start_dy_m: float = Field(ge=0.0, le=0.3, description="Start keypoint offset half-range along the wall.")
     start_dz_m: tuple[float, float] = Field(description="Start keypoint offset range upward.")
-    start_rot_deg: float = Field(ge=0.0, le=90.0, description="Max start rotation from the hang orientation.")
-    max_start_tries: int = Field(ge=1, le=10000, description="Draws for a collision-free start.")
-    range_m: float = Field(gt=0.0, le=0.5, description="RRT-Connect extension length (SE(3) metric).")
-    check_step_m: float = Field(gt=0.0, le=0.01, description="Planner's motion-check spacing.")
-    planner_clearance_m: float = Field(ge=0.0, le=0.005, description="PyBullet distance the planner keeps.")
-    max_checks: int = Field(ge=100, le=10_000_000, description="Planning budget in validity checks.")
-    simplify_steps: int = Field(ge=0, le=100000, description="Shortcut / vertex-reduction attempts.")
-    dense_step_m: float = Field(gt=0.0, le=0.001, description="Spacing of stored states (≤ 1 mm).")
+    step_m: float = Field(gt=0.001, le=0.05, description="Tree edge length of the threading planner.")
+    max_turn_deg: float = Field(gt=0.0, le=90.0, description="Largest turn of the motion direction per edge.")
+    max_pitch_deg: float = Field(gt=0.0, lt=90.0, description="Largest angle of motion from horizontal.")
+    lead_in_m: float = Field(gt=0.0, le=0.1, description="Straight final approach along the hanging keypoint's x.")
+    max_setback_m: float = Field(ge=0.0, le=0.1, description="How far short of the hang, back along the approach, ξ_0 may stop.")
+    max_lift_m: float = Field(ge=0.0, le=0.05, description="How far above the hang ξ_0 may be lifted (the object drops in).")
+    check_step_m: float = Field(gt=0.0, le=0.01, description="Largest probe-point motion between checked poses.")
+    clearance_m: float = Field(ge=0.0, le=0.01, description="PyBullet distance the reference object keeps from support and wall.")
+    probe_train_objects: bool = Field(description="Plan with the training objects beside the reference (see README).")
+    penetration_tol_m: float = Field(ge=0.0, le=0.01, description="Deepest penetration allowed to a training object.")
+    goal_bias: float = Field(gt=0.0, lt=1.0, description="Share of tree samples drawn in the start region.")
+    max_checks: int = Field(ge=100, le=10_000_000, description="Planning budget per SKT, in pose checks.")
+    shortcut_steps: int = Field(ge=0, le=100000, description="Shortcut attempts on a found path.")
+    dense_step_m: float = Field(gt=0.0, le=0.001, description="Spacing of stored keypoint positions (≤ 1 mm).")
     recheck_spacing_m: float = Field(gt=0.0, le=0.01, description="Surface sample spacing of the re-check.")
-    recheck_step_m: float = Field(gt=0.0, le=0.001, description="Max object-point motion between re-checked states.")
+    recheck_step_m: float = Field(gt=0.0, le=0.002, description="Max object-point motion between re-checked poses.")
 
     @model_validator(mode="after")
     def _ranges(self) -> "RrtSktsParams":
@@ -136,6 +162,8 @@ class RrtSktsParams(_Section):
         _check_range("start_dz_m", self.start_dz_m)
         if self.start_dx_m[0] <= 0:
             raise ValueError("start_dx_m: starts must lie in front of the hang (> 0)")
+        if self.dense_step_m > self.step_m:
+            raise ValueError("dense_step_m: must not exceed step_m")
         return self
 
 
@@ -187,10 +215,15 @@ class TrainParams(_Section):
 
 
 class SimEvalParams(_Section):
-    methods: tuple[Literal["oracle", "template_only", "sctdn", "kpam"], ...] = Field(
-        min_length=1, description="Methods evaluated (Table I rows).")
-    robot_base_m: tuple[float, float, float] = Field(description="World position of the Panda base.")
-    grasp_pitch_deg: float = Field(ge=-60.0, le=60.0, description="Approach axis pitched down from keypoint +x.")
+    methods: tuple[Literal["oracle", "oracle_floating", "template_only", "sctdn", "kpam"], ...] = Field(
+        min_length=1, description="Methods evaluated (Table I rows); oracle_floating: the oracle SKT carried by a floating hand (no arm).")
+    robot_base_m: tuple[float, float, float] = Field(description="World position of the Panda base, m.")
+    grasp_pitch_deg: tuple[float, ...] = Field(
+        min_length=1, description="Grasp candidates: approach axis pitched down from keypoint +x, degrees, tried in this order.")
+    grasp_rolls_deg: tuple[float, ...] = Field(
+        min_length=1, description="Grasp candidates: roll of the hand about its approach axis, degrees (inner loop of the order).")
+    setup_clearance_m: float = Field(
+        ge=0.0, le=0.02, description="Set-up: least robot–support, robot–wall and robot–object distance at the start pose, m.")
     step_m: float = Field(gt=0.0, le=0.002, description="Max object-point motion per command (≤ 2 mm).")
     steps_per_command: int = Field(ge=1, le=100, description="Physics steps per joint command.")
     hold_steps: int = Field(ge=0, le=10000, description="Steps holding ξ_0 before the release.")
@@ -198,7 +231,7 @@ class SimEvalParams(_Section):
     ik_tol_m: float = Field(gt=0.0, le=0.02, description="Set-up IK: accepted position error.")
     ik_tol_rad: float = Field(gt=0.0, le=0.2, description="Set-up IK: accepted rotation error.")
     max_joint_step_rad: float = Field(gt=0.0, le=1.0, description="Set-up IK: max joint change per command.")
-    ik_restarts: int = Field(ge=1, le=100, description="Set-up IK: start configurations tried.")
+    ik_restarts: int = Field(ge=1, le=100, description="Set-up IK: start configurations tried per grasp candidate.")
     grasp_force_n: float = Field(gt=0.0, le=1000.0, description="Force limit of the rigid hold.")
     retreat_m: float = Field(ge=0.0, le=0.3, description="Retreat of the open hand toward the robot.")
     retreat_steps: int = Field(ge=1, le=10000, description="Steps of the retreat.")
@@ -207,6 +240,18 @@ class SimEvalParams(_Section):
     kpam_lift_m: float = Field(ge=0.0, le=0.05, description="kPAM baseline: release this high above the hang.")
     n_record: int = Field(ge=0, le=100, description="Rollouts per method recorded to Rerun.")
     record_every: int = Field(ge=1, le=1000, description="Physics steps between recorded frames.")
+
+    @model_validator(mode="after")
+    def _grasps(self) -> "SimEvalParams":
+        if any(not 0.0 <= a < 90.0 for a in self.grasp_pitch_deg):
+            raise ValueError(f"grasp_pitch_deg: each pitch must lie in [0, 90) degrees, got {list(self.grasp_pitch_deg)}")
+        if any(not -180.0 <= a <= 180.0 for a in self.grasp_rolls_deg):
+            raise ValueError(f"grasp_rolls_deg: each roll must lie in [-180, 180] degrees, got {list(self.grasp_rolls_deg)}")
+        for key in ("grasp_pitch_deg", "grasp_rolls_deg", "methods"):
+            values = getattr(self, key)
+            if len(set(values)) != len(values):
+                raise ValueError(f"{key}: duplicate entries in {list(values)}")
+        return self
 
 
 class Params(_Section):

@@ -102,36 +102,3 @@ def capture(fn: Callable[[T], R], item: T) -> "R | Failed":
         return Failed(err.reason, str(err))
     except SktError as err:
         return Failed(type(err).__name__, str(err))
-
-
-def run_forked(fn: Callable[[T], R], item: T) -> R:
-    """Run ``fn(item)`` in a forked child process and return its result.
-
-    For libraries with process-global state that must start fresh per item (OMPL's random
-    generator can only be seeded before its first use). The result travels back pickled
-    over a pipe (in-memory IPC only); an exception in the child is re-raised here.
-    """
-    import os
-    import pickle
-
-    r, w = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # child
-        os.close(r)
-        try:
-            payload = pickle.dumps((True, fn(item)))
-        except BaseException as err:  # noqa: BLE001 - re-raised in the parent
-            payload = pickle.dumps((False, err))
-        with os.fdopen(w, "wb") as f:
-            f.write(payload)
-        os._exit(0)
-    os.close(w)
-    with os.fdopen(r, "rb") as f:
-        payload = f.read()
-    _, status = os.waitpid(pid, 0)
-    if not payload:
-        raise RuntimeError(f"forked child for {item!r} died (status {status})")
-    ok, value = pickle.loads(payload)
-    if not ok:
-        raise value
-    return value

@@ -33,10 +33,11 @@ SUPPORTS = TableSchema(
 
 OBJECTS = TableSchema(
     "objects",
-    1,
+    2,
     {
         "object_id": pa.string(),
         "category": pa.string(),
+        "split": pa.string(),
         "aperture": pa.string(),
         "is_reference": pa.bool_(),
         "aperture_clearance_m": pa.float64(),
@@ -121,7 +122,7 @@ LABELS = TableSchema(
 
 TRIALS = TableSchema(
     "trials",
-    1,
+    2,
     {
         "trial_id": pa.string(),
         "method": pa.string(),
@@ -136,5 +137,7 @@ TRIALS = TableSchema(
         "max_track_err_m": pa.float64(),
         "touched_support": pa.bool_(),
         "blocked_by": pa.string(),
+        "grasp": pa.string(),
+        "detail": pa.string(),
     },
 )

@@ -1,9 +1,9 @@
 """bench — speed figures as JSON (``make bench``), kept apart from the tests.
 
-Runs on the artifacts of ``make repro`` with the committed params and merges its keys into
-``reports/bench/bench.json``:
+Runs on the artifacts of ``make repro`` with the committed params and writes
+``reports/bench/bench.json`` afresh (every key from this run; nothing kept from an older file):
 
-- ``rrt_plan_s_median``: median OMPL planning time per SKT attempt (1 process per support);
+- ``rrt_plan_s_median``: median planning time per SKT attempt (1 process per support);
 - ``rrt_skts_per_min``: SKTs (planned + independently re-checked) per minute of wall time
   on ``compute.n_workers`` workers, over a sample of supports balanced across levels;
 - ``rrt_recheck_s_median``: median re-check time per SKT;
@@ -40,7 +40,7 @@ from stages._common import run_items
 
 def rrt_bench(params, root: Path, per_level: int) -> dict:
     supports = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")
-    all_tasks = load_skt_tasks(root, params.common.seed, params.rrt_skts)
+    all_tasks = load_skt_tasks(root, params.common.seed, params.rrt_skts, params.clustering.T)
     tasks = [t for lv in LEVELS
              for t in [t for t in all_tasks if supports.loc[t.support_id, "difficulty"] == lv][:per_level]]
     t0 = time.perf_counter()
@@ -89,7 +89,8 @@ def sctdn_bench(root: Path, n: int = 50) -> dict:
 
 def sim_bench(params, root: Path, per_level: int) -> dict:
     p = params.sim_eval
-    supports, objects, _ = load_test_set(root, params.clustering.T, params.common.seed, p.grasp_pitch_deg)
+    supports, objects, _ = load_test_set(root, params.clustering.T, params.common.seed,
+                                         p.grasp_pitch_deg, p.grasp_rolls_deg)
     chosen = [s for lv in LEVELS for s in [s for s in supports if s.difficulty == lv][:per_level]]
     settings = trial_settings(p, params.contact_sim)
     pre = np.asarray(p.kpam_pre_hang_m)
@@ -110,7 +111,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     params = load_params(args.params)
     out = Path(args.out)
-    bench = json.loads(out.read_text()) if out.is_file() else {}
+    bench: dict = {}  # fresh: a key this run does not measure must not survive from an old file
     bench.update(rrt_bench(params, Path(args.data_root), args.per_level))
     bench.update(sctdn_bench(Path(args.data_root)))
     bench.update(sim_bench(params, Path(args.data_root), args.per_level))

@@ -53,12 +53,19 @@ def main(argv=None) -> int:
                            seed, p.n_val_per_level, p.n_test_per_level)
     for s, split in zip(supports, splits):
         s["split"] = split
+    real = [o for o in objects if not o["is_reference"]]
+    o_splits = assign_splits([o["object_id"] for o in real], [o["category"] for o in real], seed, 0,
+                             p.n_test_objects_per_category, OBJECT_CATEGORIES, "mesh_gen/object_split")
+    for o, split in zip(real, o_splits):
+        o["split"] = split
+    for o in objects:
+        if o["is_reference"]:
+            o["split"] = "train"  # the reference object makes the labels
     write_table(out / "supports.parquet", supports, SUPPORTS)
     write_table(out / "objects.parquet", objects, OBJECTS)
 
     by_level = Counter(s["difficulty"] for s in supports)
     test_level = Counter(s["difficulty"] for s in supports if s["split"] == "test")
-    real = [o for o in objects if not o["is_reference"]]
     metrics = {
         "n_supports": len(supports),
         "n_objects": len(real),
@@ -67,6 +74,8 @@ def main(argv=None) -> int:
         "supports_by_split": dict(sorted(Counter(splits).items())),
         "supports_by_family": dict(sorted(Counter(s["family"] for s in supports).items())),
         "objects_by_category": {c: sum(o["category"] == c for o in real) for c in OBJECT_CATEGORIES},
+        "test_objects_by_category": {c: sum(o["category"] == c and o["split"] == "test" for o in real)
+                                     for c in OBJECT_CATEGORIES},
         "n_invalid": len(s_failed) + len(o_failed),
         "failures_by_reason": dict(sorted((s_fail + o_fail).items())),
         "min_part_iou": min(r["part_iou"] for r in supports + objects),

@@ -10,9 +10,10 @@ TINY = {
     "compute": {"backend": "local", "n_workers": 1, "scheduler_address": None},
     "mesh_gen": {
         "n_supports": 12,
-        "n_val_per_level": 0,
+        "n_val_per_level": 1,  # train selects on val: no split, no model (stages/train.py)
         "n_test_per_level": 1,
-        "n_objects_per_category": 1,
+        "n_objects_per_category": 2,
+        "n_test_objects_per_category": 1,
         "support_radius_m": [0.003, 0.006],
         "object_rod_radius_m": 0.01,
         "level_rise_m": [0.006, 0.02, 0.04],
@@ -20,19 +21,20 @@ TINY = {
         "curl_very_hard_deg": 200.0,
         "density_kg_m3": 700.0,
     },
-    "contact_sim": {'dt': 0.004166666666666667, 'solver_iterations': 50, 'friction': 0.6, 'rod_radius_m': 0.005, 'n_drops': 3, 'drop_steps': 480, 'perturb': {'accel_m_s2': 2.0, 'steps_per_direction': 240, 'settle_steps': 480}, 'max_init_tries': 40, 'init_clearance_m': 0.001, 'pose_noise_deg': 6.0, 'roll_noise_deg': 15.0, 'slide_noise_m': 0.03, 'release_gap_m': 0.004, 'consistency_tol_m': 0.01, 'goal_clearance_m': 0.0005},
+    "contact_sim": {'dt': 0.004166666666666667, 'solver_iterations': 50, 'friction': 0.6, 'linear_damping': 1.0, 'angular_damping': 5.0, 'rod_radius_m': 0.005, 'n_drops': 3, 'drop_steps': 480, 'perturb': {'accel_m_s2': 4.0, 'steps_per_direction': 240, 'settle_steps': 960, 'rest_speed_m_s': 0.02, 'rest_angular_speed_rad_s': 0.15, 'rest_window_steps': 120}, 'max_init_tries': 40, 'init_clearance_m': 0.001, 'pose_noise_deg': 6.0, 'roll_noise_deg': 15.0, 'slide_noise_m': 0.03, 'release_gap_m': 0.004, 'consistency_tol_m': 0.01, 'goal_clearance_m': 0.0005},
     "rotation_extraction": {'front_offset_m': 0.05},
     "render_views": {'n_azimuth': 7, 'n_elevation': 6, 'azimuth_deg': [-60.0, 60.0], 'elevation_deg': [-20.0, 55.0], 'distance_m': 0.35, 'fov_deg': 40.0, 'width': 320, 'height': 240, 'n_points': 1000, 'noise_std_m': 0.0},
     "affordance_maps": {'sigma_m': 0.005, 'alpha': 0.5, 'beta': 0.5, 'hanging_part_m': 0.03, 'visible_tol_m': 0.005},
     "clustering": {'T': 10, 'k': 3, 'n_init': 10, 'max_iter': 300},
     "train": {'epochs': 1, 'views_per_epoch': 1, 'batch_size': 16, 'lr': 0.001, 'weight_decay': 0.0001, 'val_views': [0]},
-    "sim_eval": {"methods": ["oracle", "template_only", "sctdn", "kpam"], "robot_base_m": [0.05, 0.0, 0.3],
-                 "grasp_pitch_deg": 0.0, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,
+    "sim_eval": {"methods": ["oracle", "oracle_floating", "template_only", "sctdn", "kpam"],
+                 "robot_base_m": [0.15, 0.0, 0.3], "grasp_pitch_deg": [45.0, 30.0, 60.0],
+                 "grasp_rolls_deg": [0.0, 180.0], "setup_clearance_m": 0.002, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,
                  "track_tol_m": 0.02, "ik_tol_m": 0.002, "ik_tol_rad": 0.02, "max_joint_step_rad": 0.2,
-                 "ik_restarts": 12, "grasp_force_n": 60.0, "retreat_m": 0.08, "retreat_steps": 60,
+                 "ik_restarts": 4, "grasp_force_n": 60.0, "retreat_m": 0.08, "retreat_steps": 60,
                  "kpam_pre_hang_m": [0.1, 0.0, 0.0], "kpam_lift_m": 0.01,
                  "n_record": 1, "record_every": 16},
-    "rrt_skts": {'n_skts_per_support': 1, 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'start_rot_deg': 20.0, 'max_start_tries': 100, 'range_m': 0.05, 'check_step_m': 0.0015, 'planner_clearance_m': 0.0002, 'max_checks': 40000, 'simplify_steps': 60, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
+    "rrt_skts": {'n_skts_per_support': 1, 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'step_m': 0.01, 'max_turn_deg': 35.0, 'max_pitch_deg': 75.0, 'lead_in_m': 0.01, 'max_setback_m': 0.04, 'max_lift_m': 0.02, 'check_step_m': 0.0025, 'clearance_m': 0.0005, 'probe_train_objects': False, 'penetration_tol_m': 0.005, 'goal_bias': 0.2, 'max_checks': 15000, 'shortcut_steps': 10, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
 }
 
 

@@ -34,12 +34,18 @@ def test_contract_and_determinism(tmp_path, write_params, tiny_dict):
     metrics = json.loads((rep / "metrics.json").read_text())
 
     assert metrics["n_supports"] == len(supports) == 12
-    assert metrics["n_objects"] == 5 and metrics["n_invalid"] == 0
+    assert metrics["n_objects"] == 10 and metrics["n_invalid"] == 0  # 2 per category
     assert set(metrics["supports_by_difficulty"]) == set(LEVELS)
     assert metrics["test_supports_by_difficulty"] == {lv: 1 for lv in LEVELS}
-    assert metrics["objects_by_category"] == {c: 1 for c in OBJECT_CATEGORIES}
+    assert metrics["objects_by_category"] == {c: 2 for c in OBJECT_CATEGORIES}
+    assert metrics["test_objects_by_category"] == {c: 1 for c in OBJECT_CATEGORIES}
     assert objects["is_reference"].sum() == 1
-    assert set(supports["split"]) == {"train", "test"}
+    # the split is per category, and the reference only ever makes labels
+    real = objects[~objects["is_reference"]]
+    assert {c: sorted(g) for c, g in real.groupby("category")["split"]} == {
+        c: ["test", "train"] for c in OBJECT_CATEGORIES}
+    assert (objects.loc[objects["is_reference"], "split"] == "train").all()
+    assert set(supports["split"]) == {"train", "val", "test"}
     assert supports["support_id"].is_unique and objects["object_id"].is_unique
 
     # every written mesh is a watertight solid covered by its convex parts

@@ -82,7 +82,7 @@ def build_support(task: SupportTask) -> dict:
         "support_id": task.support_id,
         "family": shape.family,
         "difficulty": diff.level,
-        "split": "",  # assigned once all supports exist
+        "split": "",  # assigned once all items exist
         "section": "square" if arm.square else "round",
         "radius_m": arm.radius,
         "blocking_height_m": diff.blocking_height_m,
@@ -114,6 +114,7 @@ def build_object(task: ObjectTask) -> dict:
     return {
         "object_id": task.object_id,
         "category": shape.category,
+        "split": "",  # assigned once all objects exist
         "aperture": shape.aperture,
         "is_reference": task.category == "reference",
         "aperture_clearance_m": aperture_clearance(parts),

@@ -1,1 +1,1 @@
-"""Motion planning of the reference object (OMPL RRT-Connect) and SKT post-processing."""
+"""Planning SKTs: the threading planner, its probe, the independent re-check, trajectories."""

@@ -1,8 +1,7 @@
-"""Two independent collision checks for an object pose against a supporting item.
+"""The re-check of planned SKTs, independent of the planner's PyBullet probe
+(:mod:`skt_lib.planning.probe`).
 
-- :func:`make_collision_fn` — the planner's check: PyBullet closest points between the
-  object's and the support's convex parts (and the wall), with PyBullet's 1 mm hull margins.
-- :class:`MeshClearance` — the re-check, a different code path: exact signed distances
+- :class:`MeshClearance` — exact signed distances
   (Open3D ``RaycastingScene``) of dense surface samples of each watertight mesh to the other
   mesh, plus the wall plane x = 0. Both directions are checked, so a thin arm piercing a
   ring tube is caught even where no vertex lies inside.
@@ -10,26 +9,10 @@
 
 import numpy as np
 import open3d as o3d
-import pybullet as pb
 import trimesh
 from scipy.spatial import cKDTree
 
 from skt_lib.geometry.convex import Mesh
-from skt_lib.sim.world import World
-
-
-def make_collision_fn(world: World, body: int, obstacles: list[int], clearance: float = 0.0):
-    """``fn(position, quat) -> True`` when ``body``, its link frame at ``position`` (3,) with
-    xyzw ``quat`` in the support frame, comes within ``clearance`` (PyBullet distance) of any
-    of ``obstacles``.
-    Works on position + quaternion so the planner's hot loop stays in PyBullet's C code."""
-    cid = world.cid
-
-    def collides(position, quat) -> bool:
-        world.set_pose_support_pq(body, position, quat)
-        return any(pb.getClosestPoints(body, o, clearance, physicsClientId=cid) for o in obstacles)
-
-    return collides
 
 
 def _scene(mesh: Mesh) -> o3d.t.geometry.RaycastingScene:

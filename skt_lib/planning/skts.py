@@ -1,10 +1,15 @@
-"""Collect SKTs for one supporting item: plan the reference object from sampled free start
-poses into its hanging pose, re-check every plan independently, convert to keypoint paths.
+"""Collect SKTs for one supporting item: thread the probe (reference + training objects)
+from free start positions into the hanging pose (:mod:`skt_lib.planning.threading`), re-check
+every SKT independently *as executed*, and measure how test objects fare along it.
 
 Start region (support frame, relative to the hanging keypoint ``k``): keypoint at
 ``k + (dx, dy, dz)`` with ``dx ∈ start_dx_m``, ``|dy| ≤ start_dy_m``, ``dz ∈ start_dz_m`` —
-in front of the support (toward the robot) and above it — with the object turned from its
-hanging orientation by a random rotation of at most ``start_rot_deg``.
+in front of the support (toward the robot) and above it. The orientation along the path is
+the SKT rule's (it follows the motion), so no start orientation is drawn.
+
+Objects: the reference object and every *training* object (``objects.parquet`` split) take
+part in making labels; *test* objects never do — they are only swept along the stored SKT
+afterwards (``test_sweeps``), for the report.
 """
 
 import time
@@ -17,12 +22,12 @@ import numpy as np
 from skt_lib.config import RrtSktsParams
 from skt_lib.errors import DataError
 from skt_lib.geometry.export import read_obj
-from skt_lib.geometry.se3 import matrix_pose, pose_matrix, random_rotation_small
+from skt_lib.geometry.se3 import invert, pose_matrix
 from skt_lib.io import read_table
-from skt_lib.parallel import run_forked
-from skt_lib.planning.collision import MeshClearance, make_collision_fn
-from skt_lib.planning.ompl_rrt import PlanningFailed, PlanSettings, plan, seed_ompl
-from skt_lib.planning.trajectory import keypoint_positions, max_point_step
+from skt_lib.planning.collision import MeshClearance
+from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn
+from skt_lib.planning.threading import ThreadingFailed, ThreadSettings, densify, plan_threading
+from skt_lib.planning.trajectory import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from skt_lib.sim.world import World
@@ -31,20 +36,40 @@ BOUNDS_MARGIN_M = 0.08
 
 
 @dataclass(frozen=True)
+class SktObject:
+    object_id: str
+    mesh: str  # watertight visual OBJ
+    collision: str  # convex parts OBJ
+    keypoint: tuple[float, ...]  # 16 floats: keypoint frame in the object frame
+
+
+@dataclass(frozen=True)
 class SktTask:
     support_id: str
+    split: str  # the support's split: test supports also get test-object sweeps
     support_urdf: str
     support_mesh: str
-    object_urdf: str
-    object_mesh: str
-    keypoint: tuple[float, float, float]  # reference keypoint, object frame
-    goal_position: tuple[float, float, float]  # hanging pose, support frame
+    reference: SktObject
+    train_objects: tuple[SktObject, ...]
+    test_objects: tuple[SktObject, ...]
+    goal_position: tuple[float, float, float]  # reference hanging pose, support frame
     goal_quat: tuple[float, float, float, float]  # xyzw
     seed: int
+    T: int  # waypoints the SKT is executed with
     params: RrtSktsParams
 
 
-def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams) -> list[SktTask]:
+def _objects(mg: Path, objects, keypoints) -> dict[str, SktObject]:
+    out = {}
+    for o in objects.itertuples():
+        if o.object_id in keypoints.index:
+            k = keypoints.loc[o.object_id]
+            out[o.object_id] = SktObject(o.object_id, str(mg / o.mesh_path), str(mg / o.collision_path),
+                                         tuple(pose_matrix(k["position"], k["quat"]).ravel()))
+    return out
+
+
+def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams, T: int) -> list[SktTask]:
     """One task per support with a hanging pose, from the artifacts under ``root`` (the
     ``data/`` folder): mesh_gen, contact_sim and rotation_extraction outputs."""
     mg = root / "mesh_gen"
@@ -52,96 +77,105 @@ def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams) -> list[SktTask]:
     objects = read_table(mg / "objects.parquet", OBJECTS)
     contacts = read_table(root / "contact_sim" / "contacts.parquet", CONTACTS)
     keypoints = read_table(root / "rotation_extraction" / "keypoints.parquet", KEYPOINTS)
-    ref, ref_kp = objects[objects["is_reference"]].iloc[0], keypoints[keypoints["is_reference"]]
-    if ref_kp.empty:
+    by_id = _objects(mg, objects, keypoints.set_index("object_id"))
+    ref_ids = objects[objects["is_reference"]]["object_id"].tolist()
+    if not ref_ids or ref_ids[0] not in by_id:
         raise DataError(f"{root / 'rotation_extraction' / 'keypoints.parquet'}: the reference "
                         "object has no keypoint")
-    kp = tuple(ref_kp.iloc[0]["position"])
+    real = objects[~objects["is_reference"]]
+    train = tuple(by_id[i] for i in real[real["split"] == "train"]["object_id"] if i in by_id)
+    test = tuple(by_id[i] for i in real[real["split"] == "test"]["object_id"] if i in by_id)
     hangs = contacts[(contacts["kind"] == "reference_on_support") & contacts["ok"]]
-    return [SktTask(h.support_id, str(mg / supports.loc[h.support_id, "urdf_path"]),
-                    str(mg / supports.loc[h.support_id, "mesh_path"]), str(mg / ref.urdf_path),
-                    str(mg / ref.mesh_path), kp, tuple(h.hang_position), tuple(h.hang_quat), seed, p)
+    return [SktTask(h.support_id, supports.loc[h.support_id, "split"],
+                    str(mg / supports.loc[h.support_id, "urdf_path"]),
+                    str(mg / supports.loc[h.support_id, "mesh_path"]), by_id[ref_ids[0]], train, test,
+                    tuple(h.hang_position), tuple(h.hang_quat), seed, T, p)
             for h in hangs.itertuples()]
 
 
-def settings(p: RrtSktsParams, object_radius: float) -> PlanSettings:
-    return PlanSettings(p.range_m, p.check_step_m, p.max_checks, p.simplify_steps,
-                        p.dense_step_m, object_radius)
+def thread_settings(p: RrtSktsParams, probe_radius: float, T: int) -> ThreadSettings:
+    return ThreadSettings(p.step_m, p.max_turn_deg, p.max_pitch_deg, p.lead_in_m, p.max_setback_m,
+                          p.max_lift_m, p.check_step_m,
+                          probe_radius, p.goal_bias, p.max_checks, p.shortcut_steps, T)
 
 
-def sample_start(rng, goal: np.ndarray, keypoint: np.ndarray, p: RrtSktsParams) -> np.ndarray:
-    """A start pose in the documented region (may collide; the caller checks)."""
-    k_goal = goal[:3, :3] @ keypoint + goal[:3, 3]
-    k = k_goal + np.array([rng.uniform(*p.start_dx_m), rng.uniform(-p.start_dy_m, p.start_dy_m),
-                           rng.uniform(*p.start_dz_m)])
-    rot = random_rotation_small(rng, p.start_rot_deg) @ goal[:3, :3]
-    t = np.eye(4)
-    t[:3, :3], t[:3, 3] = rot, k - rot @ keypoint
-    return t
+def _kp(o: SktObject) -> np.ndarray:
+    return np.asarray(o.keypoint, float).reshape(4, 4)
+
+
+def _radius(mesh, keypoint: np.ndarray) -> float:
+    return float(np.linalg.norm(mesh.vertices - keypoint[:3, 3], axis=1).max())
+
+
+def sweep_clearance(checker: MeshClearance, frames: np.ndarray, keypoint: np.ndarray) -> float:
+    """Signed clearance (m, < 0: penetration) of an object whose keypoint frame follows
+    ``frames (M, 4, 4)``, by the independent mesh check."""
+    return checker.clearance(frames @ invert(keypoint))
 
 
 def plan_support_skts(task: SktTask) -> dict:
-    """All SKTs of one support, planned in a forked child (fresh, seeded OMPL)."""
-    return run_forked(_plan_in_child, task)
-
-
-def _plan_in_child(task: SktTask) -> dict:
+    """All SKTs of one support (its own generator and PyBullet client)."""
     p = task.params
     rng = item_rng(task.seed, "rrt_skts", task.support_id)
-    seed_ompl(int(rng.integers(1, 2**31 - 1)))
-    goal = pose_matrix(task.goal_position, task.goal_quat)
-    keypoint = np.asarray(task.keypoint, dtype=np.float64)
+    ref_kp = _kp(task.reference)
+    goal = pose_matrix(task.goal_position, task.goal_quat) @ ref_kp  # hanging keypoint frame
     (support_mesh,) = read_obj(task.support_mesh)
-    (object_mesh,) = read_obj(task.object_mesh)
-    radius = float(np.linalg.norm(object_mesh.vertices, axis=1).max())
-    checker = MeshClearance(support_mesh, object_mesh, p.recheck_spacing_m)
-    k_goal = goal[:3, :3] @ keypoint + goal[:3, 3]
-    corners = np.vstack([support_mesh.vertices, k_goal + [p.start_dx_m[1], p.start_dy_m, p.start_dz_m[1]],
-                         k_goal + [0.0, -p.start_dy_m, 0.0]])
-    lower = corners.min(0) - BOUNDS_MARGIN_M
-    upper = corners.max(0) + BOUNDS_MARGIN_M
+    ref_mesh = read_obj(task.reference.mesh)[0]
+    probe_objs = (task.reference, *(task.train_objects if p.probe_train_objects else ()))
+    radius = max(_radius(read_obj(o.mesh)[0], _kp(o)) for o in probe_objs)
+    ref_radius = _radius(ref_mesh, ref_kp)
+    checker = MeshClearance(support_mesh, ref_mesh, p.recheck_spacing_m)
+    k_goal = goal[:3, 3]
+    lo_off = np.array([p.start_dx_m[0], -p.start_dy_m, p.start_dz_m[0]])
+    hi_off = np.array([p.start_dx_m[1], p.start_dy_m, p.start_dz_m[1]])
+    corners = np.vstack([support_mesh.vertices, k_goal + lo_off, k_goal + hi_off])
+    lower, upper = corners.min(0) - BOUNDS_MARGIN_M, corners.max(0) + BOUNDS_MARGIN_M
     lower[0] = max(lower[0], 0.0)
+    settings = thread_settings(p, radius, task.T)
 
-    skts, failures, plan_s, recheck_s = [], Counter(), [], []
+    def in_start(q: np.ndarray) -> bool:
+        return bool(np.all(q - k_goal >= lo_off) and np.all(q - k_goal <= hi_off))
+
+    def sample_start(g: np.random.Generator) -> np.ndarray:
+        return k_goal + g.uniform(lo_off, hi_off)
+
+    skts, failures, plan_s, recheck_s, sweeps = [], Counter(), [], [], []
     n_planned = n_recheck_ok = 0
     with World(dt=1 / 240, solver_iterations=1, with_floor=False) as world:
         wall = world.add_wall()
         sup = world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5)
-        obj = world.load(task.object_urdf, goal, fixed=False, friction=0.5)
-        collides_pq = make_collision_fn(world, obj, [sup, wall], p.planner_clearance_m)
-
-        def collides(t: np.ndarray) -> bool:
-            position, quat = matrix_pose(t)
-            return collides_pq(position, quat)
+        probe = add_probe(world, [ProbeObject(o.collision, o.keypoint) for o in probe_objs])
+        collides = make_probe_collision_fn(world, probe, [sup, wall], p.clearance_m, p.penetration_tol_m)
         for index in range(p.n_skts_per_support):
-            for _ in range(p.max_start_tries):
-                start = sample_start(rng, goal, keypoint, p)
-                if np.all(start[:3, 3] > lower) and np.all(start[:3, 3] < upper) and not collides(start):
-                    break
-            else:
-                failures["no_free_start"] += 1
-                continue
             t0 = time.perf_counter()
             try:
-                poses, n_checks = plan(start, goal, collides_pq, lower, upper, settings(p, radius))
-            except PlanningFailed as err:
+                path, n_checks = plan_threading(goal, in_start, sample_start, lower, upper, collides,
+                                                 settings, rng)
+            except ThreadingFailed as err:
                 plan_s.append(time.perf_counter() - t0)
                 failures[err.reason] += 1
                 continue
             plan_s.append(time.perf_counter() - t0)
             n_planned += 1
+            dense = densify(path, p.dense_step_m)  # the same polyline: resampling is unchanged
             t1 = time.perf_counter()
-            clearance = checker.clearance(poses)
-            step = max_point_step(poses, object_mesh.vertices)
+            executed = executed_path(resample(dense, task.T), p.recheck_step_m, ref_radius)
+            clearance = sweep_clearance(checker, executed, ref_kp)
             recheck_s.append(time.perf_counter() - t1)
-            if clearance <= 0.0 or step > p.recheck_step_m:
-                failures["recheck_collision" if clearance <= 0 else "recheck_coarse"] += 1
+            if clearance <= 0.0:
+                failures["recheck_collision"] += 1
                 continue
             n_recheck_ok += 1
-            order = poses[::-1]  # ξ_0 (hang) first
-            skts.append({"index": index, "poses": order, "n_checks": n_checks,
-                         "keypoints": keypoint_positions(order, keypoint),
-                         "min_clearance_m": clearance, "max_step_m": step})
+            poses = executed @ invert(ref_kp)  # the reference object as executed, start first
+            skts.append({"index": index, "keypoints": dense, "poses": poses[::-1], "n_checks": n_checks,
+                         "min_clearance_m": clearance})
+    if task.split == "test" and skts:  # how objects that made no label fare along the oracle SKT
+        waypoints = resample(skts[0]["keypoints"], task.T)
+        for o in task.test_objects:
+            mesh, kp = read_obj(o.mesh)[0], _kp(o)
+            frames = executed_path(waypoints, p.recheck_step_m, _radius(mesh, kp))
+            sweeps.append({"object_id": o.object_id, "clearance_m": sweep_clearance(
+                MeshClearance(support_mesh, mesh, p.recheck_spacing_m), frames, kp)})
     return {"support_id": task.support_id, "skts": skts, "failures": dict(failures),
             "plan_s": plan_s, "recheck_s": recheck_s, "n_planned": n_planned,
-            "n_recheck_ok": n_recheck_ok, "n_attempted": p.n_skts_per_support}
+            "n_recheck_ok": n_recheck_ok, "n_attempted": p.n_skts_per_support, "test_sweeps": sweeps}

@@ -57,6 +57,19 @@ def test_objects_are_deterministic_and_categories_differ(tiny_params):
     a = sample_object(item_rng(1, "o", "x"), "mug", p)
     b = sample_object(item_rng(1, "o", "x"), "mug", p)
     assert all(np.array_equal(u.vertices, v.vertices) for u, v in zip(a.parts, b.parts))
+    # every category draws a different shape from the same generator state: compare a
+    # signature (aperture kind, part count, bounding box, volume) pairwise
+    sig = {}
+    for c in OBJECT_CATEGORIES:
+        o = sample_object(item_rng(1, "o", "x"), c, p)
+        assert o.category == c
+        v = np.vstack([q.vertices for q in o.parts])
+        sig[c] = (o.aperture, len(o.parts), np.round(np.ptp(v, axis=0), 4).tolist(),
+                  round(sum(q.volume for q in o.parts), 9))
+    assert len({repr(x) for x in sig.values()}) == len(OBJECT_CATEGORIES), sig
+    # and another generator state draws another mug
+    c = sample_object(item_rng(2, "o", "x"), "mug", p)
+    assert not all(np.array_equal(u.vertices, v.vertices) for u, v in zip(a.parts, c.parts))
     with pytest.raises(ValueError, match="category"):
         sample_object(item_rng(1, "o", "x"), "teapot", p)
 

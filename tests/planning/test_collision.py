@@ -1,0 +1,66 @@
+"""The re-check (MeshClearance) finds penetrations that only one of its parts can see:
+support samples inside the object (reverse direction) and the wall plane x = 0."""
+
+import numpy as np
+import pytest
+
+from skt_lib.geometry.convex import box, union
+from skt_lib.geometry.se3 import pose_matrix
+from skt_lib.planning.collision import MeshClearance, surface_samples
+
+SPACING = 0.003
+
+
+def _ring():
+    """A thick square ring in the x–y plane, object frame at its centre: bars 12 mm square
+    in section, centreline half-size 24 mm."""
+    h, w = 0.024, 0.006
+    return union([box([0, h, 0], [h + w, w, w]), box([0, -h, 0], [h + w, w, w]),
+                  box([h, 0, 0], [w, h - w, w]), box([-h, 0, 0], [w, h - w, w])])
+
+
+def _forward_only(check, mesh, pose):
+    """The object → support direction alone (object samples in the support), for the test's
+    preconditions."""
+    pts = surface_samples(mesh, SPACING) @ pose[:3, :3].T + pose[:3, 3]
+    return check._support.signed_min(pts)
+
+
+def test_rod_piercing_a_thick_ring_is_found_by_the_reverse_direction():
+    # a 1.2 mm square rod along z at (0.152, 0.0005, ·), 40 mm long: through the ring's +y bar
+    rod = box([0.152, 0.0005, 0.0], [0.0006, 0.0006, 0.02])
+    ring = _ring()
+    check = MeshClearance(rod, ring, SPACING)
+    # the ring centred 24 mm along −y of the rod: its +y bar (12 mm thick) is pierced
+    pierced = pose_matrix([0.15, -0.024, 0.0], [0, 0, 0, 1])
+    # precondition: no ring sample lies inside the rod, so the forward direction is blind
+    assert _forward_only(check, ring, pierced) >= 0
+    assert check.clearance(pierced) < -0.004  # rod samples ≥ 4 mm deep inside the bar
+    # the rod through the ring's hole: free, ≥ 15 mm from the bars (reported at the 6 mm cap)
+    through_hole = pose_matrix([0.15, 0.0, 0.0], [0, 0, 0, 1])
+    assert check.clearance(through_hole) == pytest.approx(0.006)
+    # a batch reports its worst pose
+    assert check.clearance(np.stack([through_hole, pierced])) == pytest.approx(
+        check.clearance(pierced))
+
+
+def test_thin_rod_inside_a_thick_bar_is_found_by_the_reverse_direction():
+    # the rod entirely inside the object: nothing of the object is in the support at all
+    rod = box([0.15, 0.0, 0.0], [0.002, 0.0005, 0.0005])
+    ring = _ring()
+    check = MeshClearance(rod, ring, SPACING)
+    inside = pose_matrix([0.15, -0.024, 0.0], [0, 0, 0, 1])
+    assert _forward_only(check, ring, inside) > 0.004
+    assert check.clearance(inside) == pytest.approx(-0.0055, abs=3e-4)  # 6 mm half-bar − 0.5 mm
+
+
+def test_object_behind_the_wall_is_found_by_the_wall_plane_only():
+    support = box([0.2, 0.0, 0.0], [0.005, 0.005, 0.005])  # far from the object
+    cube = box([0, 0, 0], [0.01, 0.01, 0.01])
+    check = MeshClearance(support, cube, SPACING)
+    behind = pose_matrix([0.004, 0.0, 0.0], [0, 0, 0, 1])  # 6 mm through the wall plane
+    assert check.clearance(behind) == pytest.approx(-0.006, abs=1e-9)
+    touching = pose_matrix([0.0101, 0.0, 0.0], [0, 0, 0, 1])
+    assert check.clearance(touching) == pytest.approx(0.0001, abs=1e-9)
+    free = pose_matrix([0.05, 0.0, 0.0], [0, 0, 0, 1])
+    assert check.clearance(free) == pytest.approx(0.006)  # capped at 6 mm

@@ -1,0 +1,137 @@
+"""The threading planner on a toy peg: what it returns is clear *as executed* (rule frames at
+T, re-checked by the independent mesh check), respects its turn/pitch limits, and the
+checker checks exactly the poses that execution will visit."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from skt_lib.geometry.convex import box, union
+from skt_lib.geometry.export import write_shape
+from skt_lib.geometry.objects import reference_object
+from skt_lib.geometry.se3 import invert, skt_rotation
+from skt_lib.planning.collision import MeshClearance
+from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn
+from skt_lib.planning.threading import (
+    ThreadingFailed,
+    ThreadSettings,
+    _Checker,
+    _quat,
+    limit_direction,
+    plan_threading,
+)
+from skt_lib.planning.trajectory import executed_path, interpolate, resample, skt_frames
+from skt_lib.sim.world import World
+
+PEG_R = 0.004
+SETTINGS = ThreadSettings(step_m=0.01, max_turn_deg=35.0, max_pitch_deg=75.0, lead_in_m=0.01,
+                          max_setback_m=0.02, max_lift_m=0.01, check_step_m=0.002,
+                          probe_radius_m=0.06, goal_bias=0.2, max_checks=20000, shortcut_steps=20, T=20)
+
+
+def _scene(tmp_path, tip_rise: float = 0.0):
+    """A wall plate and a horizontal square peg along +x (optionally an upturned tip), and the
+    reference ring; returns (support mesh, ring mesh, keypoint frame in the ring's frame)."""
+    parts = [box([0.005, 0, 0], [0.005, 0.03, 0.03]), box([0.07, 0, 0], [0.065, PEG_R, PEG_R])]
+    if tip_rise:
+        parts.append(box([0.131, 0, tip_rise / 2], [PEG_R, PEG_R, tip_rise / 2 + PEG_R]))
+    support = union(parts)
+    write_shape(tmp_path / "sup", "sup", support, parts, 0.0, [0, 0, 0], np.zeros((3, 3)), (1, 1, 1, 1))
+    ring = reference_object()
+    ring_mesh = union(list(ring.parts))
+    write_shape(tmp_path / "ring", "ring", ring_mesh, list(ring.parts), 0.05, [0, 0, 0],
+                np.eye(3) * 1e-5, (1, 0, 0, 1))
+    inner_top = ring_mesh.vertices[np.abs(ring_mesh.vertices[:, 1]) < 1e-3]
+    inner_top = inner_top[(inner_top[:, 2] > 0)][:, 2].min()  # top of the aperture
+    k = np.eye(4)
+    k[:3, :3], k[:3, 3] = skt_rotation([-1.0, 0.0, 0.0]), [0.0, 0.0, inner_top]
+    return support, ring_mesh, k
+
+
+def _plan(tmp_path, seed: int, tip_rise: float = 0.0, settings: ThreadSettings = SETTINGS):
+    support, ring_mesh, k = _scene(tmp_path, tip_rise)
+    hang = np.eye(4)
+    hang[:3, 3] = [0.06, 0.0, PEG_R + 0.001 - k[2, 3]]  # aperture top 1 mm above the peg
+    goal = hang @ k
+    lo, hi = np.array([0.08, -0.03, 0.0]), np.array([0.14, 0.03, 0.08])
+    with World(1 / 240, 1, with_floor=False) as world:
+        wall = world.add_wall()
+        sup = world.load(str(tmp_path / "sup" / "sup.urdf"), np.eye(4), True, 0.5)
+        probe = add_probe(world, [ProbeObject(str(tmp_path / "ring" / "collision.obj"),
+                                              tuple(k.ravel()))])
+        collides = make_probe_collision_fn(world, probe, [sup, wall], 0.0005, 0.0)
+        path, n = plan_threading(
+            goal, lambda q: bool(np.all(q - goal[:3, 3] >= lo) and np.all(q - goal[:3, 3] <= hi)),
+            lambda g: goal[:3, 3] + g.uniform(lo, hi), np.array([0.0, -0.1, -0.1]),
+            np.array([0.3, 0.1, 0.2]), collides, settings, np.random.default_rng(seed))
+    return path, n, goal, support, ring_mesh, k, (lo, hi)
+
+
+@pytest.mark.parametrize("tip_rise", [0.0, 0.02])
+def test_planned_path_is_clear_as_executed(tmp_path, tip_rise):
+    path, n, goal, support, ring_mesh, k, (lo, hi) = _plan(tmp_path, 3, tip_rise)
+    assert 0 < n <= SETTINGS.max_checks
+    # ξ_0 at the hang, or set back / lifted within the documented ranges
+    off = path[0] - goal[:3, 3]
+    assert -1e-9 <= off[2] <= SETTINGS.max_lift_m + 1e-9 and abs(off[1]) < 1e-9
+    assert -1e-9 <= off[0] <= SETTINGS.max_setback_m + 1e-9
+    # the last stretch arrives along the hanging keypoint's x axis (here −x, toward the wall)
+    assert skt_frames(path)[0][:3, :3] == pytest.approx(skt_rotation(goal[:3, 0]), abs=1e-9)
+    assert np.all(path[-1] - goal[:3, 3] >= lo - 1e-9) and np.all(path[-1] - goal[:3, 3] <= hi + 1e-9)
+    # the independent mesh check of the ring as executed at T says clear
+    frames = executed_path(resample(path, SETTINGS.T), 0.001, 0.06)
+    assert MeshClearance(support, ring_mesh, 0.002).clearance(frames @ invert(k)) > 0
+    # turn and pitch limits between consecutive edges (execution order)
+    seg = np.diff(path[::-1], axis=0)
+    seg /= np.linalg.norm(seg, axis=1, keepdims=True)
+    turns = np.degrees(np.arccos(np.clip(np.sum(seg[1:] * seg[:-1], axis=1), -1, 1)))
+    assert turns.max() <= SETTINGS.max_turn_deg + 1e-6
+    assert np.degrees(np.abs(np.arcsin(seg[:, 2]))).max() <= SETTINGS.max_pitch_deg + 1e-6
+    if tip_rise:  # over the upturned tip: the path climbs above it
+        assert path[:, 2].max() > tip_rise
+
+
+def test_same_seed_same_path_other_seed_other_path(tmp_path):
+    a = _plan(tmp_path, 5, 0.02)[0]
+    b = _plan(tmp_path, 5, 0.02)[0]
+    c = _plan(tmp_path, 6, 0.02)[0]
+    assert np.array_equal(a, b)
+    assert a.shape != c.shape or not np.allclose(a, c)
+
+
+def test_no_path_within_budget_is_a_typed_failure(tmp_path):
+    tight = ThreadSettings(**{**SETTINGS.__dict__, "max_checks": 30})
+    with pytest.raises(ThreadingFailed) as err:
+        _plan(tmp_path, 3, 0.02, tight)
+    assert err.value.reason in {"no_path", "lead_in_blocked"}
+
+
+def test_checker_visits_exactly_the_executed_poses():
+    seen = []
+    chk = _Checker(lambda p, q: seen.append((np.array(p), np.array(q))) or False, SETTINGS)
+    ra, rb = skt_rotation([-1.0, 0.2, -0.3]), skt_rotation([-1.0, -0.1, 0.1])
+    pa, pb = np.array([0.1, 0.0, 0.05]), np.array([0.09, 0.002, 0.045])
+    assert chk.segment(pa, pb, ra, rb)
+    a, b = np.eye(4), np.eye(4)
+    a[:3, :3], a[:3, 3], b[:3, :3], b[:3, 3] = ra, pa, rb, pb
+    ref = interpolate(np.stack([a, b]), SETTINGS.check_step_m, SETTINGS.probe_radius_m)[1:]
+    assert len(seen) == len(ref) == chk.n
+    for (p, q), t in zip(seen, ref):
+        assert p == pytest.approx(t[:3, 3], abs=1e-12)
+        assert Rotation.from_quat(q).as_matrix() == pytest.approx(t[:3, :3], abs=1e-9)
+
+
+def test_quat_matches_scipy_and_limit_direction_bounds_turn_and_pitch():
+    for r in Rotation.random(300, random_state=2):
+        q = _quat(r.as_matrix())
+        assert min(np.abs(q - r.as_quat()).max(), np.abs(q + r.as_quat()).max()) < 1e-9
+    rng = np.random.default_rng(0)
+    prev = np.array([-1.0, 0.0, 0.0])
+    for _ in range(200):
+        d = limit_direction(rng.normal(size=3), prev, np.radians(30), np.radians(60))
+        assert np.linalg.norm(d) == pytest.approx(1.0)
+        assert np.degrees(np.arccos(np.clip(d @ prev, -1, 1))) <= 30 + 1e-6
+        assert np.degrees(abs(np.arcsin(d[2]))) <= 60 + 1e-6
+    # within the limits a direction is kept as is
+    d = np.array([-1.0, 0.1, 0.1]) / np.linalg.norm([-1.0, 0.1, 0.1])
+    assert limit_direction(d, prev, np.radians(30), np.radians(60)) == pytest.approx(d)
