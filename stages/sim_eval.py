@@ -26,6 +26,7 @@ from skt_lib.eval.protocol import (
     success_table,
     trial_settings,
 )
+from skt_lib.eval.stats import paired_comparisons, success_ci95, wilson_interval
 from skt_lib.geometry.export import read_obj
 from skt_lib.io import write_table
 from skt_lib.learning.predictor import SktPredictor
@@ -38,6 +39,14 @@ from viz.rollouts import log_rollouts
 
 log = logging.getLogger("sim_eval")
 
+#: Before the executor and planner rework (commit bc3544c: robot base (0.05, 0, 0.3),
+#: horizontal grasp, SKT planned in SE(3) but executed with rule frames), as measured in the
+#: executor issue on 20 test supports × 10 objects — quoted for the before/after table.
+BEFORE = {"oracle success % (all / easy / normal / hard / very hard)": "26.0 / 36 / 48 / 8 / 12",
+          "oracle ik_failed (share of trials)": "44 %",
+          "oracle collided_before_hang (share of trials)": "27.5 %",
+          "no arm (rigid hand), oracle SKT": "39.5 %"}
+
 #: The paper's Table I (success %, SCTDN and kPAM 2.0 rows) for comparison in the report.
 PAPER = {"sctdn": (83.7, 85.5, 91.7, 79.7, 77.7), "kpam": (40.1, 76.0, 54.1, 21.6, 8.8)}
 
@@ -48,7 +57,8 @@ def main(argv=None) -> int:
     p = params.sim_eval
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     T = params.clustering.T
-    supports, objects, missing = load_test_set(root, T, params.common.seed, p.grasp_pitch_deg)
+    supports, objects, missing = load_test_set(root, T, params.common.seed, p.grasp_pitch_deg,
+                                                p.grasp_rolls_deg)
     if not supports or not objects:
         raise DataError(f"{root}: no test supports with a ground-truth SKT or no test objects")
     predictor = None
@@ -79,12 +89,16 @@ def main(argv=None) -> int:
 
     table = success_table(trials)
     inference_ms = {m: 1000 * float(np.median(seconds[m])) for m in p.methods}
+    ci95 = success_ci95(trials, LEVELS)
     metrics = {m: {"success": table[m], "n_trials": int((trials["method"] == m).sum()),
                    "inference_ms": inference_ms[m],
                    "failures_by_reason": {r: int(((trials["method"] == m) &
                                                   (trials["failure_reason"] == r)).sum())
-                                          for r in REASONS}}
+                                          for r in REASONS},
+                   "success_ci95": ci95[m],
+                   "success_by_category": _by_category(trials[trials["method"] == m])}
                for m in p.methods}
+    metrics["paired"] = paired_comparisons(trials, "sctdn")
     metrics["n_test_supports"] = len(supports)
     metrics["n_test_supports_without_gt"] = len(missing)
     metrics["n_test_objects"] = len(objects)
@@ -121,8 +135,24 @@ def _pick_rollouts(trials: pd.DataFrame, n: int) -> list[str]:
     return chosen
 
 
+def _by_category(trials: pd.DataFrame) -> dict:
+    """Success rate per object category (null where the category has no trial)."""
+    return {c: (float(g["success"].mean()) if len(g := trials[trials["category"] == c]) else None)
+            for c in OBJECT_CATEGORIES}
+
+
 def _pct(x) -> str:
     return "–" if x is None else f"{100 * x:.1f}"
+
+
+def _pct_ci(rate, ci) -> str:
+    """``52.0 [45.1–58.8]``: a success rate (%) with its Wilson 95 % interval."""
+    return "–" if rate is None or ci is None else f"{_pct(rate)} [{_pct(ci[0])}–{_pct(ci[1])}]"
+
+
+def _rate_ci(success: pd.Series) -> str:
+    ci = wilson_interval(int(success.sum()), len(success))
+    return _pct_ci(float(success.mean()) if len(success) else None, ci)
 
 
 def _write_report(rep: Path, trials: pd.DataFrame, metrics: dict, methods, supports, objects,
@@ -137,31 +167,46 @@ def _write_report(rep: Path, trials: pd.DataFrame, metrics: dict, methods, suppo
         "control), releases, retreats; gravity is tilted ±y, +x and settled; the strict "
         "predicate (DESIGN §5) decides. Each method sees one seeded view of each support. "
         + (f"Test supports without a ground-truth SKT, left out: {', '.join(missing)}." if missing else ""))
-    report.heading("Table I: success rate (%) and inference time")
-    rows = [[m, f"{metrics[m]['inference_ms']:.2f}", *(_pct(metrics[m]["success"][k])
-                                                       for k in ("all", *LEVELS))] for m in methods]
+    report.heading("Table I: success rate (%) [Wilson 95 % interval] and inference time")
+    rows = [[m, f"{metrics[m]['inference_ms']:.2f}",
+             *(_pct_ci(metrics[m]["success"][k], metrics[m]["success_ci95"][k])
+               for k in ("all", *LEVELS))] for m in methods]
     rows += [[f"paper: {m}", "9" if m == "sctdn" else "–", *(f"{v:.1f}" for v in vals)]
              for m, vals in PAPER.items()]
     report.table(["method", "inference (ms)", "All", "Easy", "Normal", "Hard", "Very Hard"], rows)
     report.text("Inference: median per support, batch 1, CPU, measured apart from the simulation. "
-                "`oracle` and `kpam` are privileged (ground-truth SKT / hanging keypoint).")
+                "`oracle` and `kpam` are privileged (ground-truth SKT / hanging keypoint). "
+                "Brackets: Wilson 95 % score interval of the rate; trials on one support are "
+                "correlated, so the intervals are if anything too narrow. Paper rows have none.")
+    _paired_table(report, metrics.get("paired", {}))
+    _before_after(report, metrics)
     bar_chart({m: {lv: 100 * (metrics[m]["success"][lv] or 0) for lv in ("all", *LEVELS)}
                for m in methods}, report.figure("success.png", "Success rate (%) per level"),
               "success rate (%)")
     report.heading("Per object category (success %, paper Table III layout)")
     cats = [c for c in OBJECT_CATEGORIES if c in set(trials["category"])]
-    report.table(["method", *cats], [[m, *(_pct(trials[(trials["method"] == m) & (trials["category"] == c)]
-                                                 ["success"].mean()) for c in cats)] for m in methods])
+    report.table(["method", *cats], [[m, *(_rate_ci(trials.loc[(trials["method"] == m)
+                                                            & (trials["category"] == c), "success"])
+                                           for c in cats)] for m in methods])
     report.heading("Failure reasons")
     counts = {m: {r: metrics[m]["failures_by_reason"][r] for r in REASONS} for m in methods}
     report.table(["method", *REASONS], [[m, *counts[m].values()] for m in methods])
     bar_chart(counts, report.figure("failures.png", "Failure reasons per method (trial counts)"),
               "failures")
-    report.text("`ik_failed`: the hand cannot follow the path within tolerance (kinematics); "
+    report.text("`ik_failed`: no grasp candidate lets the hand follow the path within tolerance "
+                "(kinematics; `detail` in trials.parquet says which check); "
                 "`collided_before_hang`: the object or robot is blocked by the support or wall "
                 "on the way in; `not_reached`: released, never touched the support; `dropped`: "
-                "touched it, then fell; `perched`: rests on top; `touches_robot`: still on the "
-                "gripper.")
+                "touched it, then fell; `not_at_rest`: on the support but still moving at the "
+                "end; `on_wall_plate`: resting on the wall plate only; `perched`: rests on top; "
+                "`touches_robot`: still on the gripper. `oracle_floating` has no arm: it cannot "
+                "fail by `ik_failed`.")
+    report.heading("Per level (success % [Wilson 95 %], trials)")
+    n_by_level = trials.groupby(["method", "difficulty"]).size()
+    report.table(["method", *LEVELS],
+                 [[m, *(f"{_pct_ci(metrics[m]['success'][lv], metrics[m]['success_ci95'][lv])}, "
+                        f"n = {int(n_by_level.get((m, lv), 0))}" for lv in LEVELS)]
+                  for m in methods])
     report.heading("Per support")
     per = trials.pivot_table(index=["support_id", "difficulty"], columns="method", values="success",
                              aggfunc="mean").reset_index()
@@ -172,6 +217,39 @@ def _write_report(rep: Path, trials: pd.DataFrame, metrics: dict, methods, suppo
                 "object, SKT) on the `step` timeline: per method a few successes and the first "
                 "trial of each failure reason.")
     report.write()
+
+
+def _before_after(report: Report, metrics: dict) -> None:
+    if "oracle" not in metrics:
+        return
+    o = metrics["oracle"]
+    share = {r: o["failures_by_reason"][r] / max(1, o["n_trials"]) for r in REASONS}
+    now = [" / ".join(_pct(o["success"][k]) for k in ("all", *LEVELS)),
+           f"{100 * share['ik_failed']:.1f} %", f"{100 * share['collided_before_hang']:.1f} %",
+           f"{_pct(metrics['oracle_floating']['success']['all'])} % (`oracle_floating`)"
+           if "oracle_floating" in metrics else "–"]
+    report.heading("Oracle before / after the executor and planner rework")
+    report.table(["measure", "before (bc3544c)", "now"],
+                 [[k, v, a] for (k, v), a in zip(BEFORE.items(), now)])
+
+
+def _paired_table(report: Report, paired: dict) -> None:
+    """The paired comparisons (same trials, exact McNemar): "A beats B" only where it holds."""
+    report.heading("Paired comparisons (same support × object trials, exact McNemar, α = 0.05)")
+    if not paired:
+        report.text("No paired comparisons: `sctdn` was not evaluated.")
+        return
+    rows = []
+    for key, c in paired.items():
+        a, b = key.split("_vs_", 1)
+        verdict = {"A better": f"{a} better", "B better": f"{b} better"}.get(c["verdict"],
+                                                                             c["verdict"])
+        rows.append([f"{a} vs {b}", c["n_pairs"], c["n_both"], c["n_a_only"], c["n_b_only"],
+                     f"{c['p_value']:.3g}", verdict])
+    report.table(["comparison", "pairs", "both ok", "A only", "B only", "p", "verdict"], rows)
+    report.text("A only / B only: trials only the first / second method hung. The verdict "
+                "names a winner only where p < 0.05; otherwise the difference in Table I is "
+                "not evidence that one method beats the other.")
 
 
 if __name__ == "__main__":

@@ -74,8 +74,9 @@ def log_rollouts(path: Path, replay: list, support_meshes: dict, object_meshes: 
                                           f"({row['difficulty']}, {row['category']})"))
             for frame in frames:
                 rec.set_time("step", sequence=step + frame["step"])
-                for k in links:
-                    _transform(rec, f"world/robot/link_{k}", World.to_support(frame["links"][k]))
+                if frame["links"] is not None:  # None: the floating hand (no robot)
+                    for k in links:
+                        _transform(rec, f"world/robot/link_{k}", World.to_support(frame["links"][k]))
                 _transform(rec, f"{name}/object", frame["object"])
             step += (frames[-1]["step"] if frames else 0) + _GAP
             rec.set_time("step", sequence=step - 1)

@@ -4,6 +4,9 @@
 - ``template_only``: the same network's predicted template, aligned at its predicted
   contact point, not deformed (the paper's ablation row).
 - ``oracle``: a ground-truth SKT of the support (privileged: built per support).
+- ``oracle_floating``: the same SKT as ``oracle``, executed by a floating hand (a kinematic
+  anchor, no arm: :mod:`skt_lib.sim.execute`), to separate what the data allows from what
+  the arm allows.
 - ``kpam``: kPAM 2.0 style (privileged: the ground-truth hanging keypoint): a straight line
   from a pre-hang keypoint in front of the support to just above the hang.
 
@@ -18,6 +21,13 @@ from skt_lib.learning.predictor import Skt, SktPredictor
 from skt_lib.planning.trajectory import skt_frames
 
 LEARNED = ("template_only", "sctdn")
+#: Methods executed by the floating hand; every other method uses the Panda.
+FLOATING = ("oracle_floating",)
+
+
+def hand_of(method: str) -> str:
+    """The hand that executes ``method``'s SKTs: ``"floating"`` or ``"panda"``."""
+    return "floating" if method in FLOATING else "panda"
 
 
 class Method(Protocol):
@@ -68,7 +78,7 @@ def make_method(name: str, predictor: SktPredictor | None, gt_positions: np.ndar
         if predictor is None:
             raise ValueError(f"{name}: needs the trained predictor")
         return Learned(predictor, deform=name == "sctdn")
-    if name == "oracle":
+    if name in ("oracle", "oracle_floating"):
         return Oracle(gt_positions)
     if name == "kpam":
         return Kpam(gt_positions[0], pre_hang, lift, len(gt_positions))

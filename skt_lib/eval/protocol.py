@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from skt_lib.config import LEVELS, ContactSimParams, SimEvalParams
+from skt_lib.eval.methods import hand_of
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
 from skt_lib.io import read_npz, read_table
@@ -23,7 +24,8 @@ from skt_lib.planning.trajectory import resample
 from skt_lib.schemas import KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from skt_lib.sim.contact_sim import perturbation
-from skt_lib.sim.execute import TrialSettings, TrialTask, grasp_in_keypoint
+from skt_lib.sim.execute import TrialSettings, TrialTask
+from skt_lib.sim.grasp import Grasp, grasp_candidates
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,13 +47,18 @@ class TestObject:
     urdf: str
     mesh: str
     keypoint: np.ndarray  # (4, 4) keypoint frame in the object frame
-    kpt_ee: np.ndarray  # (4, 4) grasp target in the keypoint frame
+    grasps: tuple[Grasp, ...]  # grasp candidates (grasp target in the keypoint frame), in order
     radius_m: float  # farthest object point from the keypoint
 
 
-def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg: float
+def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_deg=(0.0,)
                   ) -> tuple[list[TestSupport], list[TestObject], list[str]]:
-    """(test supports with a ground-truth SKT, test objects, ids of test supports without)."""
+    """(test supports with a ground-truth SKT, test objects, ids of test supports without).
+
+    Each object carries its grasp candidates (:func:`skt_lib.sim.grasp.grasp_candidates`)
+    for every pitch of ``grasp_pitch_deg`` × roll of ``grasp_rolls_deg`` (degrees; pass
+    ``sim_eval.grasp_pitch_deg`` and ``sim_eval.grasp_rolls_deg``), in that order."""
+    pitches = (grasp_pitch_deg,) if np.isscalar(grasp_pitch_deg) else tuple(grasp_pitch_deg)
     mg = root / "mesh_gen"
     supports = read_table(mg / "supports.parquet", SUPPORTS)
     objects = read_table(mg / "objects.parquet", OBJECTS)
@@ -70,24 +77,26 @@ def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg: float
         test.append(TestSupport(s.support_id, s.difficulty, s.family, str(mg / s.urdf_path),
                                 str(mg / s.mesh_path), gt, points[view].astype(np.float64), view))
     objs = []
-    for o in objects[~objects["is_reference"]].itertuples():
+    for o in objects[~objects["is_reference"] & (objects["split"] == "test")].itertuples():
         if o.object_id not in keypoints.index:
             continue  # no keypoint: rotation_extraction reports it
         kp = keypoints.loc[o.object_id]
         k = pose_matrix(kp["position"], kp["quat"])
         (mesh,) = read_obj(mg / o.mesh_path)
         objs.append(TestObject(o.object_id, o.category, str(mg / o.urdf_path), str(mg / o.mesh_path),
-                               k, grasp_in_keypoint(mesh.vertices, k, grasp_pitch_deg),
+                               k, grasp_candidates(mesh.vertices, k, pitches, grasp_rolls_deg),
                                float(np.linalg.norm(mesh.vertices - k[:3, 3], axis=1).max())))
     return test, objs, missing
 
 
 def trial_settings(p: SimEvalParams, cs: ContactSimParams) -> TrialSettings:
-    """Physics (time step, solver, friction, perturbation) shared with ``contact_sim``."""
-    return TrialSettings(cs.dt, cs.solver_iterations, cs.friction, tuple(p.robot_base_m), p.step_m,
-                         p.steps_per_command, p.hold_steps, p.track_tol_m, p.ik_tol_m, p.ik_tol_rad,
-                         p.max_joint_step_rad, p.ik_restarts, p.grasp_force_n, p.retreat_m,
-                         p.retreat_steps, perturbation(cs))
+    """Physics (time step, solver, friction, damping, perturbation and at-rest thresholds)
+    shared with ``contact_sim``; robot, grasp and execution settings from ``sim_eval``."""
+    return TrialSettings(
+        cs.dt, cs.solver_iterations, cs.friction, cs.linear_damping, cs.angular_damping,
+        tuple(p.robot_base_m), p.step_m, p.steps_per_command, p.hold_steps, p.track_tol_m,
+        p.ik_tol_m, p.ik_tol_rad, p.max_joint_step_rad, p.ik_restarts, p.setup_clearance_m,
+        p.grasp_force_n, p.retreat_m, p.retreat_steps, perturbation(cs))
 
 
 def predict_all(methods: dict, supports: list[TestSupport]) -> tuple[dict, dict]:
@@ -108,9 +117,9 @@ def make_task(method: str, s: TestSupport, o: TestObject, positions: np.ndarray,
               settings: TrialSettings, record_every: int = 0) -> TrialTask:
     return TrialTask(
         f"{method}/{s.support_id}/{o.object_id}", method, s.support_id, o.object_id, s.urdf, o.urdf,
-        tuple(o.keypoint.ravel()), tuple(o.kpt_ee.ravel()), o.radius_m,
+        tuple(o.keypoint.ravel()), o.grasps, o.radius_m,
         tuple(map(tuple, np.asarray(positions, float))), settings, record_every,
-        {"difficulty": s.difficulty, "category": o.category})
+        {"difficulty": s.difficulty, "category": o.category}, hand_of(method))
 
 
 def success_table(trials: pd.DataFrame) -> dict[str, dict[str, float | None]]:

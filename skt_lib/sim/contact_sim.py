@@ -28,6 +28,8 @@ from skt_lib.sim.hanging import G, HangCheck, Perturbation, check_hang, perturb
 from skt_lib.sim.world import SUPPORT_POSE_WORLD, World
 
 ROD_LENGTH_M = 0.25
+ROD_CAP_RADIUS_M = 0.05
+ROD_CAP_THICKNESS_M = 0.004
 _PARK = pose_matrix([0.5, 0.0, 2.0], [0, 0, 0, 1])  # out of the way while placing
 
 
@@ -51,13 +53,19 @@ class HangTask:
 
 def perturbation(p: ContactSimParams) -> Perturbation:
     q = p.perturb
-    return Perturbation(q.accel_m_s2, q.steps_per_direction, q.settle_steps)
+    return Perturbation(q.accel_m_s2, q.steps_per_direction, q.settle_steps, q.rest_speed_m_s,
+                        q.rest_angular_speed_rad_s, q.rest_window_steps)
 
 
 def add_rod(world: World, radius: float, friction: float) -> int:
-    """A static horizontal rod from the wall (x = 0) to x = ROD_LENGTH_M along support +x."""
-    shape = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=radius, height=ROD_LENGTH_M,
-                                    physicsClientId=world.cid)
+    """A static horizontal rod from the wall (x = 0) to x = ROD_LENGTH_M along support +x,
+    capped at its end by a disc of radius :data:`ROD_CAP_RADIUS_M` (like a peg's end stop:
+    without it the perturbation's outward tilt slides every object off a straight rod)."""
+    shape = pb.createCollisionShapeArray(
+        [pb.GEOM_CYLINDER, pb.GEOM_CYLINDER], radii=[radius, ROD_CAP_RADIUS_M],
+        lengths=[ROD_LENGTH_M, ROD_CAP_THICKNESS_M],
+        collisionFramePositions=[[0.0, 0.0, 0.0], [0.0, 0.0, ROD_LENGTH_M / 2]],
+        physicsClientId=world.cid)
     t = world.to_world(pose_matrix([ROD_LENGTH_M / 2, 0, 0], [0, np.sin(np.pi / 4), 0, np.cos(np.pi / 4)]))
     pos, quat = matrix_pose(t)
     body = pb.createMultiBody(0, shape, basePosition=pos, baseOrientation=quat,
@@ -149,7 +157,8 @@ def simulate_hangs(task: HangTask) -> dict:
             support = world.load(task.support_urdf, np.eye(4), fixed=True, friction=p.friction)
         else:
             support = add_rod(world, p.rod_radius_m, p.friction)
-        obj = world.load(task.object_urdf, _PARK, fixed=False, friction=p.friction)
+        obj = world.load(task.object_urdf, _PARK, fixed=False, friction=p.friction,
+                         linear_damping=p.linear_damping, angular_damping=p.angular_damping)
 
         trials: list[tuple[HangCheck, np.ndarray]] = []
         reasons: Counter = Counter()
@@ -164,7 +173,7 @@ def simulate_hangs(task: HangTask) -> dict:
             world.set_gravity_support((0.0, 0.0, -G))
             world.step(p.drop_steps)
             perturb(world, pert)
-            check = check_hang(world, obj, support)
+            check = check_hang(world, obj, support, pert)
             if check.ok:
                 trials.append((check, world.pose_support(obj)))
             else:
@@ -183,7 +192,7 @@ def simulate_hangs(task: HangTask) -> dict:
         clearance = _push_clear(world, obj, support, p.goal_clearance_m)
         goal = world.pose_support(obj)
         perturb(world, pert)
-        again = check_hang(world, obj, support)
+        again = check_hang(world, obj, support, pert)
         row.update(n_consistent=n_consistent, goal_clearance_m=float(clearance))
         if clearance < p.goal_clearance_m * 0.5:
             row["failure_reason"] = "goal_not_clear"

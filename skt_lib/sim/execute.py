@@ -1,21 +1,43 @@
-"""One hanging trial: the Panda carries an object along an SKT, releases it, and the strict
+"""One hanging trial: a hand carries an object along an SKT, releases it, and the strict
 predicate of :mod:`skt_lib.sim.hanging` judges the result (DESIGN §5).
 
 The object is held rigidly at its grasp: the grasp target sits at ``ξ_i · T_kpt_ee`` while
 the object's keypoint sits at ``ξ_i`` (paper §IV, fixed keypoint→end-effector transform).
 The hold is a fixed constraint with a force limit (``grasp_force_n``), so an object pushed
-into the supporting item lags behind the hand instead of passing through it; robot–object
-collisions are off while it is held and on again after the release.
+into the supporting item lags behind the hand instead of passing through it.
 
-Sequence: start at ξ_{T-1} (set-up teleport, the only one) → follow every waypoint to ξ_0,
-interpolated so that no point of the object moves more than ``step_m`` per command → hold
-→ release, open the fingers, retreat along the approach axis → perturb → settle → predicate.
+Two hands (``TrialTask.hand``):
 
-Outcomes (``failure_reason``, empty on success):
-``ik_failed`` (the hand cannot reach the path), ``collided_before_hang`` (the object or the
-robot is blocked by the support or wall on the way in; ``blocked_by`` says which),
-``not_reached`` (released, it never touched the support), ``dropped`` (it touched the support, then fell), ``perched`` (resting
-on top), ``touches_robot`` (still on or in the gripper).
+- ``panda``: the Franka Panda. At set-up the grasp is chosen from the task's candidates
+  (:func:`skt_lib.sim.grasp.choose_grasp`: the first for which the IK finds a joint path
+  along the whole executed path, the arm clear of support and wall along it and of the
+  object at the start); robot–object
+  collisions are off while the object is held and on from the release.
+- ``floating``: no arm; a massless, collision-free kinematic anchor at the grasp target
+  (first candidate grasp) is moved to each command pose, with the same hold constraint; at
+  the release it is removed, so it cannot hold the object.
+
+Sequence: start at ξ_{T-1} (set-up teleport, the only one) → follow every pose of
+:func:`skt_lib.planning.trajectory.executed_path` to ξ_0 (no object point moves more than
+``step_m`` per command), checking the keypoint tracking error after every command → hold →
+release: constraint removed, fingers open, robot–object collisions on, retreat along the
+approach axis → perturb → settle → predicate.
+
+Outcomes (``failure_reason``, empty on success; :data:`REASONS`):
+
+- ``ik_failed``: no reachable grasp at set-up (``detail`` says which check failed:
+  ``unreachable_start``, ``tracking_tolerance``, ``joint_jump``, or ``clearance``: the arm
+  touches support or wall along the path, or the object at the start), or a tracking error above ``track_tol_m`` during execution with neither the
+  object nor the robot touching support or wall;
+- ``collided_before_hang``: the object penetrates support or wall at the start pose, or a
+  tracking error during execution while the object or robot touches them (``blocked_by``
+  lists the pairs, e.g. ``object-support,robot-wall``);
+- ``not_reached``: released, it never touched the support;
+- ``dropped``: it touched the support after the release, but ended off it (floor, or no contact);
+- ``not_at_rest``: on the support but still moving at the end (swinging, sliding off);
+- ``on_wall_plate``: resting only on the support's wall plate, not on its hanging part;
+- ``perched``: resting on top of the support (centre of mass above the supporting contact);
+- ``touches_robot``: still on or in the gripper.
 """
 
 from dataclasses import dataclass, field
@@ -23,14 +45,19 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet as pb
 
-from skt_lib.geometry.se3 import invert, matrix_pose, pose_matrix, transform_points
+from skt_lib.geometry.se3 import invert, matrix_pose, pose_matrix
 from skt_lib.planning.trajectory import executed_path
+from skt_lib.sim.grasp import Grasp, GraspFailure, choose_grasp
 from skt_lib.sim.hanging import Perturbation, check_hang, perturb_phases
 from skt_lib.sim.robot import FINGER_OPEN_M, GRASP_LINK, Panda
 from skt_lib.sim.world import World
 
-REASONS = ("ik_failed", "collided_before_hang", "not_reached", "dropped", "perched",
-           "touches_robot")
+REASONS = ("ik_failed", "collided_before_hang", "not_reached", "dropped", "not_at_rest",
+           "on_wall_plate", "perched", "touches_robot")
+HANDS = ("panda", "floating")
+#: predicate reason → trial reason; "touches_floor"/"no_contact" depend on a support touch
+_HANG_REASON = {"perched": "perched", "touches_robot": "touches_robot",
+                "not_at_rest": "not_at_rest", "on_wall_plate": "on_wall_plate"}
 
 
 @dataclass(frozen=True)
@@ -38,7 +65,9 @@ class TrialSettings:
     dt: float
     solver_iterations: int
     friction: float
-    robot_base: tuple[float, float, float]  # world position of the Panda base
+    linear_damping: float  # of the object, 1/s (World.load)
+    angular_damping: float  # of the object, 1/s (World.load)
+    robot_base: tuple[float, float, float]  # world position of the Panda base, m
     step_m: float  # max motion of any object point per command
     steps_per_command: int
     hold_steps: int
@@ -46,7 +75,8 @@ class TrialSettings:
     ik_tol_m: float  # set-up IK: accepted grasp-target error
     ik_tol_rad: float
     max_joint_step_rad: float  # set-up IK: largest joint change between commands
-    ik_restarts: int
+    ik_restarts: int  # set-up IK: start configurations per grasp candidate
+    setup_clearance_m: float  # set-up: least robot distance to support, wall, object
     grasp_force_n: float
     retreat_m: float
     retreat_steps: int
@@ -62,32 +92,20 @@ class TrialTask:
     support_urdf: str
     object_urdf: str
     keypoint: tuple[float, ...]  # 16 floats: keypoint frame in the object frame (row-major)
-    kpt_ee: tuple[float, ...]  # 16 floats: grasp target in the keypoint frame
+    grasps: tuple[Grasp, ...]  # grasp candidates, in the order they are tried
     object_radius_m: float  # farthest object point from the keypoint
     positions: tuple[tuple[float, float, float], ...]  # SKT, support frame, ξ_0 first
     settings: TrialSettings
     record_every: int = 0  # > 0: keep a trace every this many physics steps
     extra: dict = field(default_factory=dict)  # copied into the row (difficulty, category…)
-
-
-def grasp_in_keypoint(vertices: np.ndarray, keypoint: np.ndarray, pitch_deg: float,
-                      band_m: float = 0.02, standoff_m: float = 0.01) -> np.ndarray:
-    """Grasp target pose (4×4) in the keypoint frame: behind (−x) the lowest ``band_m`` of
-    the object as it hangs, ``standoff_m`` clear of it; the approach axis is keypoint +x
-    pitched down by ``pitch_deg`` (the hand comes from behind and above)."""
-    v = transform_points(invert(keypoint), vertices)
-    low = v[v[:, 2] <= v[:, 2].min() + band_m]
-    p = np.radians(pitch_deg)
-    t = np.eye(4)
-    t[:3, :3] = np.array([[np.sin(p), 0.0, np.cos(p)], [0.0, -1.0, 0.0], [np.cos(p), 0.0, -np.sin(p)]])
-    t[:3, 3] = [low[:, 0].min() - standoff_m, low[:, 1].mean(), low[:, 2].mean()]
-    return t
+    hand: str = "panda"  # "panda" | "floating"
 
 
 class _Trace:
-    """Robot link poses and the object pose every ``every`` steps, with phase names."""
+    """Robot link poses (``None`` without a robot) and the object pose every ``every``
+    steps, with phase names."""
 
-    def __init__(self, world: World, robot: Panda, obj: int, every: int):
+    def __init__(self, world: World, robot: Panda | None, obj: int, every: int):
         self.world, self.robot, self.obj, self.every = world, robot, obj, every
         self.frames: list[dict] = []
         self._count = 0
@@ -98,84 +116,138 @@ class _Trace:
             self._count += 1
             if self.every and self._count % self.every == 0:
                 self.frames.append({"step": self._count, "phase": phase,
-                                    "links": self.robot.link_poses(),
+                                    "links": None if self.robot is None else self.robot.link_poses(),
                                     "object": self.world.pose_support(self.obj)})
 
 
+class _Anchor:
+    """The floating hand: a massless body without collision shape, teleported to each
+    commanded grasp-target pose (world frame)."""
+
+    def __init__(self, world: World, t_world: np.ndarray):
+        self.cid = world.cid
+        pos, quat = matrix_pose(t_world)
+        self.body = pb.createMultiBody(0.0, -1, -1, pos, quat, physicsClientId=self.cid)
+
+    def move(self, t_world: np.ndarray) -> None:
+        pos, quat = matrix_pose(t_world)
+        pb.resetBasePositionAndOrientation(self.body, pos, quat, physicsClientId=self.cid)
+
+    def remove(self) -> None:
+        pb.removeBody(self.body, physicsClientId=self.cid)
+
+
 def run_trial(task: TrialTask) -> dict:
-    """Run one trial in a fresh world; returns ``{"row": …, "trace": [...]}``."""
+    """Run one trial in a fresh world; returns ``{"row": …, "trace": [...]}`` (row: schema
+    ``trials``)."""
     s = task.settings
+    if task.hand not in HANDS:
+        raise ValueError(f"hand: expected one of {HANDS}, got {task.hand!r}")
+    if not task.grasps:
+        raise ValueError(f"{task.trial_id}: no grasp candidates")
     keypoint = np.asarray(task.keypoint, float).reshape(4, 4)
-    kpt_ee = np.asarray(task.kpt_ee, float).reshape(4, 4)
     path = executed_path(task.positions, s.step_m, task.object_radius_m)
     row = {"trial_id": task.trial_id, "method": task.method, "support_id": task.support_id,
            "object_id": task.object_id, **task.extra, "success": False, "failure_reason": "",
            "n_commands": len(path), "n_executed": 0, "max_track_err_m": 0.0,
-           "touched_support": False, "blocked_by": ""}
+           "touched_support": False, "blocked_by": "", "grasp": "", "detail": ""}
     with World(s.dt, s.solver_iterations) as world:
         wall = world.add_wall()
         support = world.load(task.support_urdf, np.eye(4), fixed=True, friction=s.friction)
         obj = world.load(task.object_urdf, path[0] @ invert(keypoint), fixed=False,
-                         friction=s.friction)
-        robot = Panda(world, pose_matrix(s.robot_base, [0, 0, 0, 1]))
-        trace = _Trace(world, robot, obj, task.record_every)
-        targets = [world.to_world(xi @ kpt_ee) for xi in path]
-        joints = robot.joint_path(targets, s.ik_tol_m, s.ik_tol_rad, s.max_joint_step_rad,
-                                  s.ik_restarts)
-        if joints is None:
-            return _end(row, "ik_failed", trace)
-        robot.set_collision_with(obj, False)
-        world.set_pose_support(obj, path[0] @ invert(keypoint))
-        row["blocked_by"] = _blockers(world, {"object": obj, "robot": robot.body},
-                                      {"support": support, "wall": wall}, start=True)
+                         friction=s.friction, linear_damping=s.linear_damping,
+                         angular_damping=s.angular_damping)
+        fixed = {"support": support, "wall": wall}
+        row["blocked_by"] = _blockers(world, {"object": obj}, fixed, start=True)
         if row["blocked_by"]:
+            trace = _Trace(world, None, obj, task.record_every)
+            row["detail"] = "object penetrates at the start pose"
             return _end(row, "collided_before_hang", trace)
-        grip = _attach(world, robot, obj, s.grasp_force_n)
 
-        for k, (xi, q) in enumerate(zip(path, joints)):
-            robot.command(q)
+        if task.hand == "panda":
+            robot = Panda(world, pose_matrix(s.robot_base, [0, 0, 0, 1]))
+            trace = _Trace(world, robot, obj, task.record_every)
+            choice = choose_grasp(world, robot, path, task.grasps, [support, wall], obj, s.ik_tol_m,
+                                  s.ik_tol_rad, s.max_joint_step_rad, s.ik_restarts,
+                                  s.setup_clearance_m)
+            if isinstance(choice, GraspFailure):
+                row["detail"] = choice.describe()
+                return _end(row, "ik_failed", trace)
+            row["grasp"] = choice.grasp.label
+            kpt_ee, joints = choice.grasp.matrix(), choice.joints
+            robot.set_collision_with(obj, False)
+            grip = _attach(world, robot.body, GRASP_LINK, obj, s.grasp_force_n)
+            movers = {"object": obj, "robot": robot.body}
+
+            def command(k: int) -> None:
+                robot.command(joints[k])
+        else:
+            robot = None
+            trace = _Trace(world, None, obj, task.record_every)
+            grasp = task.grasps[0]
+            row["grasp"] = grasp.label
+            kpt_ee = grasp.matrix()
+            anchor = _Anchor(world, world.to_world(path[0] @ kpt_ee))
+            grip = _attach(world, anchor.body, -1, obj, s.grasp_force_n)
+            movers = {"object": obj}
+
+            def command(k: int) -> None:
+                anchor.move(world.to_world(path[k] @ kpt_ee))
+
+        for k, xi in enumerate(path):
+            command(k)
             trace.step(s.steps_per_command, "approach")
             err = _keypoint_error(world, obj, keypoint, xi)
             row["max_track_err_m"] = max(row["max_track_err_m"], err)
             row["n_executed"] = k + 1
             if err > s.track_tol_m:
-                row["blocked_by"] = _blockers(world, {"object": obj, "robot": robot.body},
-                                              {"support": support, "wall": wall})
+                row["blocked_by"] = _blockers(world, movers, fixed)
+                row["detail"] = f"tracking error {1000 * err:.1f} mm at command {k + 1}/{len(path)}"
                 return _end(row, "collided_before_hang" if row["blocked_by"] else "ik_failed", trace)
         trace.step(s.hold_steps, "hold")
 
         pb.removeConstraint(grip, physicsClientId=world.cid)
-        robot.command_fingers(FINGER_OPEN_M)
-        final = robot.grasp_world()
-        for i in range(1, s.retreat_steps + 1):
-            back = final @ pose_matrix([0.0, 0.0, -s.retreat_m * i / s.retreat_steps], [0, 0, 0, 1])
-            robot.command(robot.ik(back))
-            trace.step(1, "retreat")
-            row["touched_support"] |= bool(world.contacts(obj, support))
-        robot.set_collision_with(obj, True)
+        if robot is not None:
+            robot.command_fingers(FINGER_OPEN_M)
+            robot.set_collision_with(obj, True)  # from the release: the hand can knock it off
+            final = robot.grasp_world()
+            for i in range(1, s.retreat_steps + 1):
+                back = final @ pose_matrix([0.0, 0.0, -s.retreat_m * i / s.retreat_steps], [0, 0, 0, 1])
+                robot.command(robot.ik(back))
+                trace.step(1, "retreat")
+                row["touched_support"] |= bool(world.contacts(obj, support))
+        else:
+            anchor.remove()
+            for _ in range(s.retreat_steps):
+                trace.step(1, "retreat")
+                row["touched_support"] |= bool(world.contacts(obj, support))
         phases = perturb_phases(s.perturbation)
         for i, (gravity, steps) in enumerate(phases):
             world.set_gravity_support(gravity)
             trace.step(steps, "settle" if i == len(phases) - 1 else "perturb")
             row["touched_support"] |= bool(world.contacts(obj, support))
-        check = check_hang(world, obj, support, robot.body)
+        check = check_hang(world, obj, support, s.perturbation,
+                           None if robot is None else robot.body)
         if check.ok:
             row["success"] = True
             return _end(row, "", trace)
-        reason = {"perched": "perched", "touches_robot": "touches_robot"}.get(
-            check.reason, "dropped" if row["touched_support"] else "not_reached")
+        row["detail"] = f"predicate: {check.reason}"
+        reason = _HANG_REASON.get(check.reason, "dropped" if row["touched_support"] else "not_reached")
         return _end(row, reason, trace)
 
 
-def _attach(world: World, robot: Panda, obj: int, max_force: float) -> int:
-    """Fixed constraint holding ``obj`` at its current pose relative to the grasp link
-    (both frames are PyBullet's centre-of-mass frames)."""
-    link = pb.getLinkState(robot.body, GRASP_LINK, computeForwardKinematics=1,
-                           physicsClientId=world.cid)
+def _attach(world: World, body: int, link: int, obj: int, max_force: float) -> int:
+    """Fixed constraint holding ``obj`` at its current pose relative to ``body``'s ``link``
+    (−1: the base; both frames are PyBullet's centre-of-mass frames)."""
+    if link >= 0:
+        state = pb.getLinkState(body, link, computeForwardKinematics=1, physicsClientId=world.cid)
+        frame = pose_matrix(state[0], state[1])
+    else:
+        frame = pose_matrix(*pb.getBasePositionAndOrientation(body, physicsClientId=world.cid))
     obj_pos, obj_quat = pb.getBasePositionAndOrientation(obj, physicsClientId=world.cid)
-    rel = invert(pose_matrix(link[0], link[1])) @ pose_matrix(obj_pos, obj_quat)
+    rel = invert(frame) @ pose_matrix(obj_pos, obj_quat)
     pos, quat = matrix_pose(rel)
-    cid = pb.createConstraint(robot.body, GRASP_LINK, obj, -1, pb.JOINT_FIXED, [0, 0, 0],
+    cid = pb.createConstraint(body, link, obj, -1, pb.JOINT_FIXED, [0, 0, 0],
                               parentFramePosition=pos, childFramePosition=[0, 0, 0],
                               parentFrameOrientation=quat, physicsClientId=world.cid)
     pb.changeConstraint(cid, maxForce=max_force, physicsClientId=world.cid)

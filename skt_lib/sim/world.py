@@ -63,11 +63,22 @@ class World:
         return pb.createMultiBody(0, shape, basePosition=pos, baseOrientation=quat,
                                   physicsClientId=self.cid)
 
-    def load(self, urdf: str, t_support: np.ndarray, fixed: bool, friction: float) -> int:
+    def load(self, urdf: str, t_support: np.ndarray, fixed: bool, friction: float,
+             linear_damping: float | None = None, angular_damping: float | None = None) -> int:
+        """Load ``urdf`` with its link frame at ``t_support`` (support frame).
+
+        ``linear_damping`` / ``angular_damping``: PyBullet's multibody damping rates, 1/s
+        (force −k·m·v, torque −k·I·ω; ``None`` keeps PyBullet's default 0.04). They stand in
+        for the air drag and contact losses that PyBullet's rolling contacts lack, so that a
+        hung object stops swinging."""
         pos, quat = matrix_pose(self.to_world(t_support))
         body = pb.loadURDF(urdf, pos, quat, useFixedBase=fixed, physicsClientId=self.cid)
         pb.changeDynamics(body, -1, lateralFriction=friction, spinningFriction=0.001,
                           rollingFriction=0.0001, physicsClientId=self.cid)
+        if linear_damping is not None:
+            pb.changeDynamics(body, -1, linearDamping=linear_damping, physicsClientId=self.cid)
+        if angular_damping is not None:
+            pb.changeDynamics(body, -1, angularDamping=angular_damping, physicsClientId=self.cid)
         info = pb.getDynamicsInfo(body, -1, physicsClientId=self.cid)
         self._inertial[body] = pose_matrix(info[3], info[4])
         self._inertial_pq[body] = (info[3], info[4])

@@ -14,6 +14,7 @@ from skt_lib.sim.hanging import check_hang, perturb
 from skt_lib.sim.keypoints import keypoint_from_hang, orthonormality_error
 from skt_lib.sim.world import World
 from stages import contact_sim
+from tests.conftest import TINY
 
 pytestmark = pytest.mark.slow
 
@@ -37,10 +38,11 @@ def _hang_again(params_path, data, support_id, offset=(0.0, 0.0, 0.0)):
         sup = world.load(str(data / "mesh_gen" / supports.loc[support_id, "urdf_path"]),
                          np.eye(4), fixed=True, friction=p.friction)
         obj = world.load(str(data / "mesh_gen" / ref["urdf_path"]), goal, fixed=False,
-                         friction=p.friction)
+                         friction=p.friction, linear_damping=p.linear_damping,
+                         angular_damping=p.angular_damping)
         start_clearance = world.min_distance(obj, sup)
         perturb(world, perturbation(p))
-        return check_hang(world, obj, sup), world.pose_support(obj), goal, start_clearance
+        return check_hang(world, obj, sup, perturbation(p)), world.pose_support(obj), goal, start_clearance
 
 
 def test_contract_and_success(tiny_dataset):
@@ -48,12 +50,13 @@ def test_contract_and_success(tiny_dataset):
     supports, objects, contacts = _tables(data)
     m = json.loads((reports / "contact_sim" / "metrics.json").read_text())
     assert m["n_supports"] == len(supports) == 12
-    assert m["support_success_rate"] >= 0.95 and m["n_objects_ok"] == m["n_objects"] == 5
+    n_objects = 5 * TINY["mesh_gen"]["n_objects_per_category"]
+    assert m["support_success_rate"] >= 0.95 and m["n_objects_ok"] == m["n_objects"] == n_objects
     ok = contacts[contacts["ok"]]
     assert np.isfinite(np.stack(ok["hang_quat"])).all()
     assert (ok["goal_clearance_m"] >= 0.00025).all()  # stored goals are collision-free
     k = json.loads((reports / "rotation_extraction" / "metrics.json").read_text())
-    assert k["n_keypoints"] == 6 and k["max_orthonormality_error"] <= 1e-6
+    assert k["n_keypoints"] == n_objects + 1 and k["max_orthonormality_error"] <= 1e-6
     kp = read_table(data / "rotation_extraction" / "keypoints.parquet", KEYPOINTS)
     for r in kp.itertuples():
         rot = np.reshape(r.rotation, (3, 3))
@@ -68,7 +71,8 @@ def test_stored_hanging_pose_is_stable_and_3cm_off_falls(tiny_dataset):
         check, pose, goal, clearance = _hang_again(params, data, sid)
         assert clearance > 0, sid  # collision-free goal
         assert check.ok, (sid, check.reason)
-        assert np.linalg.norm(pose[:3, 3] - goal[:3, 3]) < 0.01, sid
+        # the ≈22° outward tilt may slide it along a straight arm, but not off it
+        assert np.linalg.norm(pose[:3, 3] - goal[:3, 3]) < 0.03, sid
         off, _, _, _ = _hang_again(params, data, sid, offset=(0.0, 0.03, 0.0))
         assert not off.ok, sid
         assert off.reason in ("touches_floor", "no_contact")

@@ -1,5 +1,7 @@
-"""The trial executor: interpolation bound, grasp frame, determinism, and the predicate's
+"""The trial executor's parts: interpolation bound, grasp frames, and the predicate's
 still-in-gripper case with a real Panda."""
+
+import re
 
 import numpy as np
 import pytest
@@ -7,9 +9,9 @@ from scipy.spatial.transform import Rotation
 
 from skt_lib.geometry.se3 import pose_matrix, transform_points
 from skt_lib.planning.trajectory import interpolate
-from skt_lib.sim.execute import grasp_in_keypoint
+from skt_lib.sim.grasp import grasp_candidates, grasp_in_keypoint
 from skt_lib.sim.hanging import check_hang, perturb
-from skt_lib.sim.robot import Panda
+from skt_lib.sim.robot import IKFailure, Panda
 from tests.sim.test_hanging import PERT, _ring_world, _settle_from
 
 
@@ -38,20 +40,29 @@ def test_interpolation_moves_no_point_more_than_the_step():
     assert len(interpolate(frames, 2 * step, radius)) < 0.6 * len(path)
 
 
-@pytest.mark.parametrize("pitch", [0.0, 30.0])
-def test_grasp_is_behind_the_lowest_part_and_approaches_along_keypoint_x(pitch):
+@pytest.mark.parametrize("pitch,roll", [(0.0, 0.0), (30.0, 0.0), (45.0, 180.0), (60.0, -30.0)])
+def test_grasp_is_behind_the_lowest_part_and_approaches_along_keypoint_x(pitch, roll):
     rng = np.random.default_rng(1)
     verts = rng.uniform([-0.02, -0.03, -0.12], [0.02, 0.03, 0.01], size=(500, 3))
     keypoint = pose_matrix([0.0, 0.0, 0.01], Rotation.from_euler("z", 30, degrees=True).as_quat())
-    g = grasp_in_keypoint(verts, keypoint, pitch, band_m=0.02, standoff_m=0.01)
+    g = grasp_in_keypoint(verts, keypoint, pitch, roll, band_m=0.02, standoff_m=0.01)
     r = g[:3, :3]
     assert np.allclose(r.T @ r, np.eye(3)) and np.linalg.det(r) == pytest.approx(1.0)
-    p = np.radians(pitch)
+    p, q = np.radians(pitch), np.radians(roll)
     assert np.allclose(r[:, 2], [np.cos(p), 0, -np.sin(p)])  # approach: keypoint +x, pitched down
+    # roll turns the hand's y axis about the approach: roll 0 → keypoint −y
+    assert np.dot(r[:, 1], [0, -1, 0]) == pytest.approx(np.cos(q))
     v = transform_points(np.linalg.inv(keypoint), verts)
     low = v[v[:, 2] <= v[:, 2].min() + 0.02]
     assert g[0, 3] == pytest.approx(low[:, 0].min() - 0.01)
     assert v[:, 2].min() <= g[2, 3] <= v[:, 2].min() + 0.02
+
+
+def test_grasp_candidates_come_pitch_major_in_the_given_order():
+    verts = np.random.default_rng(2).uniform(-0.05, 0.05, size=(200, 3))
+    c = grasp_candidates(verts, np.eye(4), (45.0, 30.0), (0.0, 180.0))
+    assert [g.label for g in c] == ["pitch45_roll0", "pitch45_roll180", "pitch30_roll0", "pitch30_roll180"]
+    assert np.allclose(c[2].matrix(), grasp_in_keypoint(verts, np.eye(4), 30.0, 0.0))
 
 
 def test_predicate_rejects_an_object_still_in_the_gripper(tmp_path):
@@ -64,11 +75,26 @@ def test_predicate_rejects_an_object_still_in_the_gripper(tmp_path):
         grasp = np.eye(4)
         grasp[:3, :3] = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # approach −x
         grasp[:3, 3] = weight[:3, 3]
-        robot = Panda(world, pose_matrix([0.05, 0.0, 0.3], [0, 0, 0, 1]))
-        assert robot.joint_path([world.to_world(grasp)], 0.002, 0.02, 0.2, 12) is not None
+        robot = Panda(world, pose_matrix([0.15, 0.0, 0.3], [0, 0, 0, 1]))
+        assert not isinstance(robot.joint_path([world.to_world(grasp)], 0.002, 0.02, 0.2, 12), IKFailure)
         robot.command_fingers(0.0)
         world.step(120)
         perturb(world, PERT)
-        check = check_hang(world, ring, rod, robot.body)
+        check = check_hang(world, ring, rod, PERT, robot.body)
         assert not check.ok and check.reason == "touches_robot"
         assert world.contacts(ring, rod)  # it is on the rod: only the gripper makes it fail
+
+
+@pytest.mark.parametrize("key,value,message", [
+    ("grasp_pitch_deg", [45.0, 95.0], "sim_eval: grasp_pitch_deg: each pitch must lie in [0, 90)"),
+    ("grasp_rolls_deg", [0.0, 0.0], "sim_eval: grasp_rolls_deg: duplicate entries"),
+    ("grasp_pitch_deg", [], "sim_eval.grasp_pitch_deg"),
+    ("methods", ["oracle", "oracle_hovering"], "sim_eval.methods"),
+])
+def test_grasp_and_method_params_are_validated(tiny_dict, key, value, message):
+    from skt_lib.config import parse_params
+    from skt_lib.errors import ParamsError
+
+    tiny_dict["sim_eval"][key] = value
+    with pytest.raises(ParamsError, match=re.escape(message)):
+        parse_params(tiny_dict)

@@ -1,5 +1,5 @@
 """The success predicate on hand-made scenes: it accepts a hung object and rejects a dropped,
-a perched and a never-reached one."""
+a perched, a never-reached, a still-swinging one and one resting on the wall plate only."""
 
 import numpy as np
 import pybullet as pb
@@ -10,20 +10,21 @@ from skt_lib.sim.contact_sim import add_rod
 from skt_lib.sim.hanging import Perturbation, check_hang, perturb, supporting_cluster
 from skt_lib.sim.world import World
 
-PERT = Perturbation(2.0, 240, 480)
+PERT = Perturbation(4.0, 240, 960, 0.02, 0.15, 120)
 
 
 def _ring_world(urdf_dir):
-    from skt_lib.config import parse_params
+    from skt_lib.config import MeshGenParams
     from skt_lib.geometry.build import ObjectTask, build_object
     from tests.conftest import TINY
 
-    row = build_object(ObjectTask(0, "reference", 0, parse_params(TINY).mesh_gen, str(urdf_dir)))
+    row = build_object(ObjectTask(0, "reference", 0, MeshGenParams(**TINY["mesh_gen"]), str(urdf_dir)))
     world = World(1 / 240, 50)
     world.add_wall()
     rod = add_rod(world, 0.005, 0.6)
     ring = world.load(str(urdf_dir / row["urdf_path"]), pose_matrix([0.5, 0, 2], [0, 0, 0, 1]),
-                      fixed=False, friction=0.6)
+                      fixed=False, friction=0.6, linear_damping=1.0,
+                      angular_damping=5.0)
     return world, rod, ring
 
 
@@ -31,7 +32,7 @@ def _settle_from(world, rod, body, t):
     world.set_pose_support(body, t)
     world.step(480)
     perturb(world, PERT)
-    return check_hang(world, body, rod)
+    return check_hang(world, body, rod, PERT)
 
 
 @pytest.fixture
@@ -62,7 +63,7 @@ def test_rejects_object_lying_on_top(scene):
     flat = pose_matrix([0.12, 0, 0.005 + 0.0042], [0, np.sin(np.pi / 4), 0, np.cos(np.pi / 4)])
     world.set_pose_support(ring, flat)
     world.step(60)
-    check = check_hang(world, ring, rod)
+    check = check_hang(world, ring, rod, PERT)
     assert not check.ok and check.reason == "perched"
 
 
@@ -73,12 +74,12 @@ def test_rejects_object_that_never_reached_the_support(tmp_path):
         world.floor = None
         world.set_pose_support(ring, pose_matrix([0.4, 0.3, 0.0], [0, 0, 0, 1]))
         world.step(120)
-        assert check_hang(world, ring, rod).reason == "no_contact"
+        assert check_hang(world, ring, rod, PERT).reason == "no_contact"
 
 
 def test_gravity_is_normal_after_perturbation(scene):
     world, _, _ = scene
-    perturb(world, Perturbation(2.0, 1, 1))
+    perturb(world, Perturbation(4.0, 1, 1, 0.01, 0.1, 1))
     # a free sphere now falls straight down in the support frame
     s = pb.createMultiBody(1.0, pb.createCollisionShape(pb.GEOM_SPHERE, radius=0.01,
                                                         physicsClientId=world.cid),
@@ -97,3 +98,34 @@ def test_supporting_cluster_takes_the_loaded_cluster():
     assert c == pytest.approx((pts[2] * 5 + pts[3] * 3) / 8)
     with pytest.raises(ValueError):
         supporting_cluster(np.zeros((0, 3)), np.zeros(0))
+
+
+def test_rejects_object_still_swinging_unless_it_settles(scene):
+    world, rod, ring = scene
+    assert _settle_from(world, rod, ring, pose_matrix([0.12, 0, 0.009 - 0.0215], [0, 0, 0, 1])).ok
+    # the hung ring pushed into a swing about the rod: judged at once, it is still moving …
+    pb.resetBaseVelocity(ring, [0, 0, 0], [5.0, 0, 0], physicsClientId=world.cid)
+    quick = Perturbation(4.0, 1, 1, PERT.rest_speed_m_s, PERT.rest_angular_speed_rad_s, 30)
+    check = check_hang(world, ring, rod, quick)
+    assert not check.ok and check.reason == "not_at_rest"
+    assert world.contacts(ring, rod)  # on the rod: only the motion makes it fail
+    # … and once it has settled it is accepted
+    world.step(PERT.settle_steps)
+    assert check_hang(world, ring, rod, PERT).ok
+
+
+def test_rejects_object_resting_on_the_wall_plate_only(tmp_path):
+    from tests.sim import scenes
+
+    world, _, ring = _ring_world(tmp_path)
+    with world:
+        support = world.load(scenes.write_support(tmp_path), np.eye(4), fixed=True, friction=0.6)
+        # the ring hung on the tab that sticks 1 cm out of the plate (all of it at x ≤ 1 cm)
+        top = scenes.TAB_Z_M + 0.003
+        world.set_pose_support(ring, pose_matrix([0.005, scenes.TAB_Y_M, top - scenes.RING_INNER_M - 0.001],
+                                                 [0, 0, 0, 1]))
+        world.step(480)
+        check = check_hang(world, ring, support, PERT)
+        assert world.contacts(ring, support)  # it does rest on the support …
+        assert world.com_support(ring)[2] < top  # … below it, not perched …
+        assert not check.ok and check.reason == "on_wall_plate"  # … but only on the plate

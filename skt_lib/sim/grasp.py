@@ -1,0 +1,119 @@
+"""Grasps (the paper's fixed keypoint→end-effector transform ``T_kpt_ee``) and the per-trial
+grasp chooser.
+
+A grasp candidate places the grasp target (between the fingertips) ``standoff_m`` behind
+(keypoint −x) the lowest ``band_m`` of the object as it hangs, with the approach axis (hand
++z) along keypoint +x pitched down by ``pitch`` (the hand comes from behind and above) and
+the hand rolled by ``roll`` about that axis. Candidates come in a fixed order (pitch-major,
+as listed in params); :func:`choose_grasp` takes the first one for which the set-up IK finds
+a joint path along the whole executed path, with the arm clear of the support and the wall
+along it and clear of the object at the start.
+"""
+
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from skt_lib.geometry.se3 import invert, transform_points
+from skt_lib.sim.robot import FINGER_OPEN_M, IKFailure, Panda
+from skt_lib.sim.world import World
+
+
+@dataclass(frozen=True)
+class Grasp:
+    label: str  # e.g. "pitch45_roll0"
+    kpt_ee: tuple[float, ...]  # 16 floats, row-major 4×4: grasp target in the keypoint frame
+
+    def matrix(self) -> np.ndarray:
+        return np.asarray(self.kpt_ee, float).reshape(4, 4)
+
+
+@dataclass(frozen=True)
+class GraspChoice:
+    """A reachable grasp: ``index`` into the candidates, and its joint path ``(M, 7)``."""
+
+    index: int
+    grasp: Grasp
+    joints: np.ndarray
+
+
+@dataclass(frozen=True)
+class GraspFailure:
+    """No candidate is reachable: one :class:`IKFailure` per candidate, in candidate order."""
+
+    grasps: tuple[Grasp, ...]
+    failures: tuple[IKFailure, ...]
+
+    def describe(self) -> str:
+        """One line: how many candidates failed each check, and the furthest failure."""
+        counts = Counter(f.check for f in self.failures)
+        best = max(range(len(self.failures)), key=lambda i: (self.failures[i].index, -i))
+        return (f"no reachable grasp ({len(self.failures)} tried: "
+                + ", ".join(f"{n} {c}" for c, n in sorted(counts.items()))
+                + f"); furthest: {self.grasps[best].label} {self.failures[best].describe()}")
+
+
+def grasp_in_keypoint(vertices: np.ndarray, keypoint: np.ndarray, pitch_deg: float,
+                      roll_deg: float = 0.0, band_m: float = 0.02,
+                      standoff_m: float = 0.01) -> np.ndarray:
+    """Grasp target pose (4×4) in the keypoint frame (module docstring).
+
+    ``vertices (N, 3)``: object mesh, object frame, m; ``keypoint (4, 4)``: keypoint frame in
+    the object frame. Roll 0 keeps the hand's y axis along keypoint −y."""
+    v = transform_points(invert(keypoint), np.asarray(vertices, float))
+    low = v[v[:, 2] <= v[:, 2].min() + band_m]
+    p, r = np.radians(pitch_deg), np.radians(roll_deg)
+    pitched = np.array([[np.sin(p), 0.0, np.cos(p)], [0.0, -1.0, 0.0], [np.cos(p), 0.0, -np.sin(p)]])
+    rolled = np.array([[np.cos(r), -np.sin(r), 0.0], [np.sin(r), np.cos(r), 0.0], [0.0, 0.0, 1.0]])
+    t = np.eye(4)
+    t[:3, :3] = pitched @ rolled
+    t[:3, 3] = [low[:, 0].min() - standoff_m, low[:, 1].mean(), low[:, 2].mean()]
+    return t
+
+
+def grasp_candidates(vertices: np.ndarray, keypoint: np.ndarray, pitches_deg, rolls_deg,
+                     band_m: float = 0.02, standoff_m: float = 0.01) -> tuple[Grasp, ...]:
+    """Every (pitch, roll) grasp, pitch-major in the given orders."""
+    return tuple(
+        Grasp(f"pitch{p:g}_roll{r:g}",
+              tuple(grasp_in_keypoint(vertices, keypoint, p, r, band_m, standoff_m).ravel()))
+        for p in pitches_deg for r in rolls_deg)
+
+
+def choose_grasp(world: World, robot: Panda, path: np.ndarray, grasps: tuple[Grasp, ...],
+                 fixed: list[int], obj: int, tol_m: float, tol_rad: float, max_jump_rad: float,
+                 restarts: int, clearance_m: float, check_every: int = 4) -> GraspChoice | GraspFailure:
+    """The first of ``grasps`` for which :meth:`Panda.joint_path` tracks every keypoint
+    frame of ``path (M, 4, 4)`` (support frame, execution order) within ``tol_m``/``tol_rad``
+    and ``max_jump_rad``, with the arm at least ``clearance_m`` (PyBullet distance) from
+    every body of ``fixed`` (support, wall) at the start pose and at every ``check_every``-th
+    pose of the path and its last, and from ``obj`` (placed at its start pose: the hand
+    holds it at a constant offset) at the start. Kinematic only (teleports the arm). Leaves
+    the arm at the chosen path's start."""
+    if not grasps:
+        raise ValueError("grasps: no candidates")
+    to_world = world.to_world
+
+    def clear(q: np.ndarray, bodies) -> bool:
+        robot.reset(q, FINGER_OPEN_M)
+        return all(world.min_distance(robot.body, b) >= clearance_m for b in bodies)
+
+    def start_ok(q: np.ndarray) -> bool:
+        return clear(q, [*fixed, obj])
+
+    def first_blocked(joints: np.ndarray) -> int:
+        checked = [*range(0, len(joints), check_every), len(joints) - 1]
+        return next((k for k in checked if not clear(joints[k], fixed)), -1)
+
+    failures = []
+    for i, g in enumerate(grasps):
+        kpt_ee = g.matrix()
+        targets = [to_world(xi @ kpt_ee) for xi in path]
+        out = robot.joint_path(targets, tol_m, tol_rad, max_jump_rad, restarts, start_ok, first_blocked)
+        if isinstance(out, IKFailure):
+            failures.append(out)
+            continue
+        return GraspChoice(i, g, out)
+    return GraspFailure(tuple(grasps), tuple(failures))
+

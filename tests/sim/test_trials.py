@@ -1,0 +1,123 @@
+"""run_trial end to end on a scene built in code (the reference ring, a straight peg angled
+25° up from a wall plate): one trial that must succeed, one per failure reason, the floating
+hand, and a check that an always-succeeding executor would fail these tests."""
+
+import pytest
+
+from skt_lib.sim import execute
+from skt_lib.sim.execute import REASONS, run_trial
+from tests.sim import scenes
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    d = tmp_path_factory.mktemp("trial_scene")
+    ring, vertices = scenes.build_ring(d)
+    return scenes.write_support(d), ring, vertices
+
+
+def _row(scene, positions, run=None, hand="panda", **changes):
+    task = scenes.ring_task(*scene, positions, hand, **changes)
+    row = (run or run_trial)(task)["row"]
+    assert row["success"] == (row["failure_reason"] == "")
+    assert row["failure_reason"] in ("", *REASONS)
+    return row
+
+
+# Each check takes the executor, so that the last test can hand them a fake one.
+def check_success(scene, run=None):
+    row = _row(scene, scenes.straight_skt(), run)
+    assert row["success"], row
+    assert row["n_executed"] == row["n_commands"] > 20  # the whole path ran
+    assert row["max_track_err_m"] < 0.005 and row["touched_support"]
+    assert row["grasp"].startswith("pitch") and row["blocked_by"] == ""
+
+
+def check_path_through_support(scene, run=None):
+    # the same line 9 mm lower: the ring's top section runs into the peg's tip
+    row = _row(scene, scenes.straight_skt(offset=(0.0, 0.0, -0.009)), run)
+    assert row["failure_reason"] == "collided_before_hang", row
+    assert "object-support" in row["blocked_by"].split(",")
+    assert 0 < row["n_executed"] < row["n_commands"]
+
+
+def check_release_far_from_support(scene, run=None):
+    # the same line 12 cm beside the peg: released in the air, it falls to the floor
+    row = _row(scene, scenes.straight_skt(offset=(0.0, 0.12, 0.0)), run)
+    assert row["failure_reason"] == "not_reached", row
+    assert row["n_executed"] == row["n_commands"] and not row["touched_support"]
+    assert row["detail"] == "predicate: touches_floor"  # let go: it fell
+
+
+def check_unreachable(scene, run=None):
+    row = _row(scene, scenes.straight_skt(offset=(0.0, 1.5, 0.0)), run)
+    assert row["failure_reason"] == "ik_failed" and row["n_executed"] == 0, row
+    assert "unreachable_start" in row["detail"] and row["grasp"] == ""
+
+
+def check_tracking_without_contact(scene, run=None):
+    # a tolerance no controller meets: the error is not a collision, so it is ik_failed
+    row = _row(scene, scenes.straight_skt(), run, track_tol_m=1e-4)
+    assert row["failure_reason"] == "ik_failed" and row["blocked_by"] == "", row
+    assert 0 < row["n_executed"] < row["n_commands"] and "tracking error" in row["detail"]
+
+
+def check_floating_hand(scene, run=None):
+    row = _row(scene, scenes.straight_skt(), run, hand="floating")
+    assert row["success"] and row["n_executed"] == row["n_commands"], row
+    assert row["max_track_err_m"] < 0.005
+    # released in the air, the anchor is gone: nothing holds the object
+    row = _row(scene, scenes.straight_skt(offset=(0.0, 0.12, 0.0)), run, hand="floating")
+    assert row["failure_reason"] == "not_reached" and row["detail"] == "predicate: touches_floor", row
+
+
+def test_ring_hangs_on_the_peg(scene):
+    check_success(scene)
+
+
+def test_path_through_the_support_collides_before_hang(scene):
+    check_path_through_support(scene)
+
+
+def test_release_far_from_the_support_is_not_reached(scene):
+    check_release_far_from_support(scene)
+
+
+def test_path_out_of_reach_fails_at_set_up(scene):
+    check_unreachable(scene)
+
+
+def test_tracking_error_without_contact_is_ik_failed(scene):
+    check_tracking_without_contact(scene)
+
+
+def test_floating_hand_carries_the_ring_and_lets_go(scene):
+    check_floating_hand(scene)
+
+
+def test_trials_repeat_exactly_whatever_ran_before(scene):
+    task = scenes.ring_task(*scene, scenes.straight_skt(offset=(0.0, 0.12, 0.0)))
+    a = run_trial(task)["row"]
+    run_trial(scenes.ring_task(*scene, scenes.straight_skt(), "floating"))
+    assert run_trial(task)["row"] == a
+
+
+def test_an_always_succeeding_executor_fails_these_tests(scene):
+    def always_success(task):
+        return {"row": {"success": True, "failure_reason": "", "n_commands": 50, "n_executed": 50,
+                        "max_track_err_m": 0.0, "touched_support": True, "blocked_by": "",
+                        "grasp": "pitch45_roll0", "detail": ""}, "trace": []}
+
+    check_success(scene, always_success)  # the fake passes the positive case …
+    for check in (check_path_through_support, check_release_far_from_support, check_unreachable,
+                  check_tracking_without_contact, check_floating_hand):
+        with pytest.raises(AssertionError):  # … and fails every negative one
+            check(scene, always_success)
+
+
+def test_unknown_hand_is_an_error(scene):
+    task = scenes.ring_task(*scene, scenes.straight_skt(), "gripper")
+    with pytest.raises(ValueError, match="hand"):
+        execute.run_trial(task)
