@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: env repro test bench clean-env
+.PHONY: env repro test bench mutation clean-env
 
 env: $(STAMP)
 
@@ -39,6 +39,12 @@ test: $(STAMP)
 bench: $(STAMP)
 	@# speed figures into reports/bench/bench.json; needs the artifacts of `make repro`
 	$(BIN)/python -m stages.bench
+
+mutation: $(STAMP)
+	@# mutmut on the modules the tests must guard, one at a time, each with its fast unit
+	@# tests; summary in reports/tests/mutation.{json,md}. Minutes per module; not in .ci/run.
+	@# One module: make mutation MODULES=skt_lib/planning/trajectory.py
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python tools/mutation.py $(MODULES)
 
 clean-env:
 	rm -rf $(VENV)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from skt_lib.config import LEVELS, load_params
+from skt_lib.errors import DataError
 from skt_lib.io import read_npz, read_table
 from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
 from skt_lib.schemas import SUPPORTS
@@ -34,12 +35,20 @@ def main(argv=None) -> int:
     tasks = [RenderTask(s.support_id, str(src / s.mesh_path), str(out / f"{s.support_id}.npz"), seed, p)
              for s in supports.itertuples()]
     t0 = time.perf_counter()
-    results, _, _ = run_items(render_support, tasks, params.compute, "supports")
+    results, failures, failed = run_items(render_support, tasks, params.compute, "supports")
     wall = time.perf_counter() - t0
+    for task, f in failed:
+        log.error("%s: %s (%s)", task.support_id, f.reason, f.message)
+    if not results:
+        raise DataError(f"{src}: no support rendered; failures {dict(failures)}")
     render_ms = 1000 * np.array([t for r in results for t in r["render_s"]])
     n_views = p.n_azimuth * p.n_elevation
     metrics = {
-        "n_supports": len(results),
+        "n_supports": len(tasks),
+        "n_rendered": len(results),
+        "n_failed": len(failed),
+        "failures_by_reason": dict(sorted(failures.items())),
+        "failed_supports": [t.support_id for t, _ in failed],
         "views_per_support": n_views,
         "points_per_view": p.n_points,
         "on_surface_rate": float(np.mean([r["on_surface_rate"] for r in results])),
@@ -49,7 +58,9 @@ def main(argv=None) -> int:
     }
     write_metrics(rep, metrics)
 
-    sample = [s for lv in LEVELS for s in supports[supports["difficulty"] == lv]["support_id"][:1]]
+    done = {r["support_id"] for r in results}
+    sample = [s for lv in LEVELS
+              for s in [s for s in supports[supports["difficulty"] == lv]["support_id"] if s in done][:1]]
     clouds = {sid: read_npz(out / f"{sid}.npz", RENDER_SPEC) for sid in sample}
     with recording("render_views", out / "render_views.rrd", "render_views: partial clouds") as rec:
         for k, sid in enumerate(sample):
@@ -60,7 +71,9 @@ def main(argv=None) -> int:
                 log_camera(rec, f"{e}/camera", c["cameras"][v], p.width, p.height, p.fov_deg)
 
     report = Report("render_views", rep)
-    report.text(f"{len(results)} supports × {n_views} views × {p.n_points} points in {wall:.1f} s wall; "
+    report.text(f"{len(results)} of {len(tasks)} supports rendered (failed: "
+                f"{metrics['failures_by_reason'] or 'none'}) × {n_views} views × {p.n_points} "
+                f"points in {wall:.1f} s wall; "
                 f"render (ray casting only) median {np.median(render_ms):.2f} ms per view "
                 f"({p.width}×{p.height}). Views re-rendered at 2× resolution: "
                 f"{metrics['n_views_rerendered']}; padded with duplicates: {metrics['n_views_padded']}. "
@@ -71,7 +84,7 @@ def main(argv=None) -> int:
                 if v < n_views], report.figure("views.png", "Sample partial clouds (one support per "
                                                 "level; views 0, 17, 41)"), ncols=3)
     report.write()
-    log.info("%d supports rendered", len(results))
+    log.info("%d of %d supports rendered", len(results), len(tasks))
     return 0
 
 

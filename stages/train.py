@@ -16,6 +16,7 @@ import torch
 from dvclive import Live
 
 from skt_lib.config import load_params
+from skt_lib.errors import DataError
 from skt_lib.io import read_npz
 from skt_lib.learning.data import load_supports
 from skt_lib.learning.predictor import SktPredictor
@@ -37,7 +38,11 @@ def main(argv=None) -> int:
     T, k = int(tz["T"]), int(tz["k"])
     supports = load_supports(root, T)
     train = [s for s in supports if s.split == "train"]
-    val = [s for s in supports if s.split == "val"] or train[:4]
+    val = [s for s in supports if s.split == "val"]
+    if not train or not val:
+        raise DataError(f"{root / 'mesh_gen'}: {len(train)} training and {len(val)} validation "
+                        "supports with labels; model selection needs both (set "
+                        "mesh_gen.n_val_per_level ≥ 1) — it never selects on training supports")
     cfg = SctdnConfig(k=k, T=T, n_points=supports[0].points.shape[1])
     settings = TrainSettings(p.epochs, p.views_per_epoch, p.batch_size, p.lr, p.weight_decay,
                              tuple(p.val_views))
@@ -76,12 +81,17 @@ def main(argv=None) -> int:
                 f"training support ({len(train)} supports) in {wall / 60:.1f} min on "
                 f"{torch.get_num_threads()} CPU threads; best epoch chosen on {len(val)} validation "
                 f"supports × views {list(p.val_views)}.")
-    report.table(["metric (best epoch)", "value"], [[k2, v] for k2, v in best.items()])
+    report.table(["metric (best epoch)", "value", "unit"],
+                 [[k2, v, _unit(k2)] for k2, v in best.items()])
+    report.text("`train_*` are the training losses, averaged over the epoch: `train_traj` is the "
+                "mean waypoint distance in *normalised cloud units* (cloud max radius = 1), not "
+                "mm; compare training and validation on the curves, not across units.")
     curves(history, ["val_traj_l2_mm", "val_template_only_l2_mm"],
            report.figure("val_l2.png", "Validation waypoint error: SCTDN vs the aligned template"),
            "validation trajectory error", "mm")
     curves(history, ["train_loss", "train_traj", "train_aff", "train_cls"],
-           report.figure("train_loss.png", "Training losses"), "training", "loss")
+           report.figure("train_loss.png", "Training losses (normalised cloud units, not mm)"),
+           "training", "loss (normalised units)")
     report.text(f"Inference (batch 1, {cfg.n_points} points in → SKT out, model loaded): median "
                 f"{metrics['inference_ms_median']:.1f} ms. Curves: `dvc plots show` "
                 f"(reports/train/live/plots/metrics).")
@@ -89,6 +99,17 @@ def main(argv=None) -> int:
     report.text("```\n" + profile + "\n```")
     report.write()
     return 0
+
+
+def _unit(metric: str) -> str:
+    """The unit of a training/validation figure, for the report."""
+    if metric.endswith("_mm"):
+        return "mm"
+    if metric == "val_cls_acc":
+        return "fraction"
+    if metric == "val_affordance_mse":
+        return "affordance² (unitless)"
+    return "normalised units (loss)"
 
 
 if __name__ == "__main__":

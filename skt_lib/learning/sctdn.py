@@ -76,12 +76,19 @@ class Sctdn(nn.Module):
         if contact_n is None:
             contact_n = xyz_n[torch.arange(len(xyz_n)), aff.argmax(-1)]
         aligned = contact_n[:, None] + self.templates[family] / scale[:, None, None]
-        mask = (aff > self.cfg.aff_threshold).float()
-        mask = torch.where(mask.sum(-1, keepdim=True) > 0, mask, torch.ones_like(mask))
-        shape = (feats + (mask[:, None] - 1) * 1e4).max(-1).values  # masked max-pool
+        shape = masked_max_pool(feats, aff, self.cfg.aff_threshold)
         x = torch.cat([self.wp_mlp(aligned), shape[:, None].expand(-1, aligned.shape[1], -1)], -1)
         traj = aligned + self.offset(self.lstm(x)[0])
         return {"logits": logits, "affordance": aff, "aligned": aligned, "trajectory": traj}
+
+
+def masked_max_pool(feats: torch.Tensor, aff: torch.Tensor, threshold: float) -> torch.Tensor:
+    """Per-cloud max of ``feats (B, C, N)`` over the points whose affordance ``aff (B, N)``
+    exceeds ``threshold`` (over all points of a cloud where none does) → ``(B, C)``.
+    Masked-out points are pushed down by 1e4 (features are post-ReLU, far below that)."""
+    mask = (aff > threshold).float()
+    mask = torch.where(mask.sum(-1, keepdim=True) > 0, mask, torch.ones_like(mask))
+    return (feats + (mask[:, None] - 1) * 1e4).max(-1).values
 
 
 def traj_distance(pred: torch.Tensor, gt: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:

@@ -1,9 +1,12 @@
+import numpy as np
 import pytest
 import torch
 
 from skt_lib.learning.pointnet2 import (
-    _fps_torch, ball_query, ball_query_naive, fps, fps_naive, gather,
+    FeaturePropagation, SetAbstraction, _fps_torch, ball_query, ball_query_naive, fps, fps_naive,
+    gather,
 )
+from skt_lib.learning.sctdn import masked_max_pool, traj_distance
 
 
 @pytest.mark.parametrize("n,npoint", [(64, 16), (500, 128)])
@@ -28,3 +31,233 @@ def test_gather_shapes():
     idx = torch.tensor([[[0, 3]], [[1, 1]]])
     out = gather(pts, idx)
     assert out.shape == (2, 1, 2, 3) and torch.equal(out[1, 0, 0], pts[1, 1])
+
+
+# --- SetAbstraction, FeaturePropagation: each against a slow loop twin (eval mode) ---------
+
+
+def _randomise(module: torch.nn.Module, seed: int) -> torch.nn.Module:
+    """Random weights and BatchNorm statistics, eval mode: every layer does something."""
+    g = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for m in module.modules():
+            if isinstance(m, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)):
+                m.running_mean.copy_(torch.randn(m.num_features, generator=g) * 0.1)
+                m.running_var.copy_(torch.rand(m.num_features, generator=g) + 0.5)
+                m.weight.copy_(torch.rand(m.num_features, generator=g) + 0.5)
+                m.bias.copy_(torch.randn(m.num_features, generator=g) * 0.1)
+    return module.eval()
+
+
+def _mlp_on_points(mlp, x):
+    """The shared MLP on one set of points ``x (K, C)`` → ``(K, C')``: 1×1 convs are per point."""
+    if isinstance(mlp[0], torch.nn.Conv2d):
+        return mlp(x.T[None, :, :, None])[0, :, :, 0].T
+    return mlp(x.T[None])[0].T
+
+
+def set_abstraction_naive(sa: SetAbstraction, xyz, feats):
+    """Reference: FPS centres, ball groups, relative coordinates then features, MLP per point,
+    max over each group — loops over clouds and centres."""
+    b, n, _ = xyz.shape
+    if sa.npoint is None:
+        new_xyz = torch.zeros(b, 1, 3)
+        groups = [[list(range(n))] for _ in range(b)]
+    else:
+        centres = fps_naive(xyz, sa.npoint)
+        new_xyz = torch.stack([xyz[i, centres[i]] for i in range(b)])
+        groups = ball_query_naive(sa.radius, sa.nsample, xyz, new_xyz).tolist()
+    out = []
+    for i in range(b):
+        cols = []
+        for s, members in enumerate(groups[i]):
+            rows = []
+            for j in members:
+                rel = xyz[i, j] - new_xyz[i, s]
+                rows.append(rel if feats is None else torch.cat([rel, feats[i, :, j]]))
+            cols.append(_mlp_on_points(sa.mlp, torch.stack(rows)).max(0).values)
+        out.append(torch.stack(cols, 1))
+    return new_xyz, torch.stack(out)
+
+
+def feature_propagation_naive(fp: FeaturePropagation, xyz_fine, xyz_coarse, feats_fine,
+                              feats_coarse):
+    """Reference: for each fine point, the (up to) 3 nearest coarse points, weights 1/d
+    normalised, interpolated coarse features, then the skip features, then the MLP."""
+    b, n, _ = xyz_fine.shape
+    out = []
+    for i in range(b):
+        cols = []
+        for p in range(n):
+            d = [float(torch.linalg.norm(xyz_fine[i, p] - q)) for q in xyz_coarse[i]]
+            near = sorted(range(len(d)), key=d.__getitem__)[:3]
+            w = [1.0 / (d[j] + 1e-8) for j in near]
+            f = sum(wj / sum(w) * feats_coarse[i, :, j] for wj, j in zip(w, near))
+            cols.append(f if feats_fine is None else torch.cat([f, feats_fine[i, :, p]]))
+        x = torch.stack(cols)  # (N, C)
+        out.append(_mlp_on_points(fp.mlp, x).T)
+    return torch.stack(out)
+
+
+@pytest.mark.parametrize("npoint,with_feats", [(12, True), (12, False), (None, True),
+                                               (None, False)])
+def test_set_abstraction_matches_naive(npoint, with_feats):
+    g = torch.Generator().manual_seed(3)
+    xyz = torch.rand(2, 60, 3, generator=g) - 0.5
+    feats = torch.randn(2, 4, 60, generator=g) if with_feats else None
+    c_in = 3 + (4 if with_feats else 0)
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        sa = _randomise(SetAbstraction(npoint, 0.3, 8, [c_in, 16, 24]), 1)
+    with torch.no_grad():
+        new_xyz, out = sa(xyz, feats)
+        ref_xyz, ref = set_abstraction_naive(sa, xyz, feats)
+    assert out.shape == (2, 24, npoint or 1)
+    assert torch.equal(new_xyz, ref_xyz)
+    assert torch.allclose(out, ref, atol=1e-5)
+    assert out.std() > 0.01  # not a degenerate all-zero output
+
+
+@pytest.mark.parametrize("n_coarse,with_skip", [(10, True), (10, False), (2, True)])
+def test_feature_propagation_matches_naive(n_coarse, with_skip):
+    g = torch.Generator().manual_seed(n_coarse)
+    xyz_f, xyz_c = torch.rand(2, 25, 3, generator=g), torch.rand(2, n_coarse, 3, generator=g)
+    f_c = torch.randn(2, 6, n_coarse, generator=g)
+    f_f = torch.randn(2, 5, 25, generator=g) if with_skip else None
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        fp = _randomise(FeaturePropagation([6 + (5 if with_skip else 0), 16, 8]), 2)
+    with torch.no_grad():
+        out = fp(xyz_f, xyz_c, f_f, f_c)
+        ref = feature_propagation_naive(fp, xyz_f, xyz_c, f_f, f_c)
+    assert out.shape == (2, 8, 25) and torch.allclose(out, ref, atol=1e-5)
+    assert out.std() > 0.01
+
+
+def test_feature_propagation_reproduces_features_at_the_coarse_points():
+    """A fine point on a coarse point takes (almost) exactly that point's features."""
+    g = torch.Generator().manual_seed(5)
+    xyz_c = torch.rand(1, 7, 3, generator=g)
+    f_c = torch.randn(1, 4, 7, generator=g)
+    fp = FeaturePropagation([4, 4]).eval()
+    with torch.no_grad():
+        fp.mlp[0].weight.copy_(torch.eye(4)[:, :, None])
+        fp.mlp[0].bias.zero_()
+        out = fp(xyz_c, xyz_c, None, f_c)
+    assert torch.allclose(out, torch.relu(f_c), atol=1e-5)
+
+
+# --- the masked max-pool and the padded trajectory distance (skt_lib/learning/sctdn.py) ------
+
+
+def masked_max_pool_naive(feats, aff, threshold):
+    out = torch.empty(feats.shape[:2])
+    for b in range(feats.shape[0]):
+        keep = [j for j in range(feats.shape[2]) if float(aff[b, j]) > threshold]
+        keep = keep or list(range(feats.shape[2]))
+        for c in range(feats.shape[1]):
+            out[b, c] = max(float(feats[b, c, j]) for j in keep)
+    return out
+
+
+def test_masked_max_pool_matches_naive():
+    g = torch.Generator().manual_seed(0)
+    feats = torch.rand(4, 6, 50, generator=g) * 3
+    aff = torch.rand(4, 50, generator=g) * 0.3
+    aff[1] = 0.05  # nothing above the threshold: pool over every point
+    aff[2, :10] = 0.25  # exactly at the threshold: not above it
+    aff[2, 10:] = 0.0
+    aff[2, 3] = 0.5  # one point: its features
+    feats[:, :, 0] = 10.0  # the largest features, on a point masked out in clouds 0, 2, 3
+    aff[0, 0] = aff[2, 0] = aff[3, 0] = 0.0
+    out = masked_max_pool(feats, aff, 0.25)
+    assert torch.allclose(out, masked_max_pool_naive(feats, aff, 0.25))
+    assert torch.equal(out[2], feats[2, :, 3]) and torch.equal(out[1], feats[1].max(-1).values)
+    assert (out[[0, 2, 3]] < 10.0).all() and (out[1] == 10.0).all()
+
+
+def traj_distance_naive(pred, gt, valid):
+    out = []
+    for b in range(pred.shape[0]):
+        ds = [float(torch.linalg.norm(pred[b] - gt[b, k], dim=-1).mean())
+              for k in range(gt.shape[1]) if bool(valid[b, k])]
+        out.append(min(ds))
+    return torch.tensor(out)
+
+
+def test_traj_distance_ignores_padding_and_matches_naive():
+    """Supports with 1, 3 and 2 ground-truth SKTs: make_batch pads to 3 with zeros; a padded
+    slot must never be the nearest, even where the prediction sits on it."""
+    from skt_lib.learning.data import SupportData
+    from skt_lib.learning.train import make_batch
+
+    rng = np.random.default_rng(0)
+    sup = []
+    for i, n_skts in enumerate((1, 3, 2)):
+        pts = rng.normal(size=(1, 64, 3)).astype(np.float32) * 0.05
+        skts = rng.normal(size=(n_skts, 6, 3)) * 0.05 + 0.2
+        sup.append(SupportData(f"s{i}", "train", 0, pts, np.zeros((1, 64), np.float32), skts,
+                               np.zeros(3)))
+    b = make_batch([(s, 0) for s in sup])
+    assert b["gt"].shape == (3, 3, 6, 3)
+    assert b["valid"].tolist() == [[True, False, False], [True, True, True], [True, True, False]]
+    pred = torch.zeros(3, 6, 3)  # exactly on the zero padding
+    pred[1] = b["gt"][1, 2] + 0.01  # near the third SKT of support 1
+    d = traj_distance(pred, b["gt"], b["valid"])
+    assert torch.allclose(d, traj_distance_naive(pred, b["gt"], b["valid"]))
+    assert d[1] == pytest.approx(0.01 * np.sqrt(3), rel=1e-4)
+    assert (d[[0, 2]] > 0.5).all()  # the padding (at the prediction) is never chosen
+    assert torch.isinf(traj_distance(pred, b["gt"], torch.zeros(3, 3, dtype=torch.bool))).all()
+
+
+def test_shared_mlps_are_conv_batchnorm_relu_per_layer():
+    sa, fp = SetAbstraction(8, 0.2, 4, [7, 16, 32]), FeaturePropagation([5, 12, 6])
+    for seq, conv, bn, widths in ((sa.mlp, torch.nn.Conv2d, torch.nn.BatchNorm2d, [7, 16, 32]),
+                                  (fp.mlp, torch.nn.Conv1d, torch.nn.BatchNorm1d, [5, 12, 6])):
+        assert [type(m) for m in seq] == [conv, bn, torch.nn.ReLU] * 2
+        assert [(m.in_channels, m.out_channels) for m in seq[::3]] == list(zip(widths, widths[1:]))
+        assert all(m.kernel_size in ((1, 1), (1,)) for m in seq[::3])
+        assert [m.num_features for m in seq[1::3]] == widths[1:]
+    assert (sa.npoint, sa.radius, sa.nsample) == (8, 0.2, 4)
+
+
+def test_ball_query_boundary_far_from_origin_and_empty_groups():
+    # a point exactly at the radius is inside (d² = r² exactly, in float32 too)
+    xyz = torch.tensor([[[0.0, 0, 0], [0.5, 0, 0], [1.0, 0, 0], [0.25, 0, 0]]])
+    expected = torch.tensor([[[0, 1, 3, 0]]])
+    assert torch.equal(ball_query(0.5, 4, xyz, xyz[:, :1]), expected)
+    assert torch.equal(ball_query_naive(0.5, 4, xyz, xyz[:, :1]), expected)
+    # 1 km from the origin the matrix-product distance form loses the centimetres: exact
+    # differences must still agree with the naive loops
+    g = torch.Generator().manual_seed(2)
+    far = torch.rand(1, 60, 3, generator=g) * 0.05 + 1000.0
+    assert torch.equal(ball_query(0.02, 6, far, far[:, :12]),
+                       ball_query_naive(0.02, 6, far, far[:, :12]))
+    # a centre with no point within the radius: the group is its nearest point, repeated
+    centres = torch.tensor([[[0.1, 0.0, 0.0], [0.8, 0.01, 0.0]]])
+    assert torch.equal(ball_query(0.01, 3, xyz, centres), torch.tensor([[[0] * 3, [2] * 3]]))
+
+
+def test_ops_keep_the_input_device():
+    """On PyTorch's data-free ``meta`` device (a stand-in for CUDA): every tensor an op
+    creates lives on the input's device; a buffer created on the CPU fails here."""
+    x = torch.rand(2, 30, 3, device="meta")
+    idx = fps(x, 5)
+    assert idx.device.type == "meta" and idx.dtype == torch.int64 and idx.shape == (2, 5)
+    q = ball_query(0.3, 4, x, x[:, :5])
+    assert q.device.type == "meta" and q.dtype == torch.int64 and q.shape == (2, 5, 4)
+    sa = SetAbstraction(None, 0.0, 0, [3, 8]).to("meta").eval()
+    new_xyz, f = sa(x, None)
+    assert new_xyz.device.type == "meta" and new_xyz.shape == (2, 1, 3) and f.shape == (2, 8, 1)
+
+
+def test_fps_routes_cpu_to_open3d_and_other_devices_to_torch(monkeypatch):
+    from skt_lib.learning import pointnet2
+
+    calls, real = [], pointnet2._fps_torch
+    monkeypatch.setattr(pointnet2, "_fps_torch",
+                        lambda xyz, n: calls.append((xyz.device.type, n)) or real(xyz, n))
+    x = torch.rand(2, 40, 3, generator=torch.Generator().manual_seed(1))
+    assert fps(x, 6).dtype == torch.int64 and calls == []
+    assert fps(x.to("meta"), 6).shape == (2, 6) and calls == [("meta", 6)]
+    assert _fps_torch(x, 6).dtype == torch.int64

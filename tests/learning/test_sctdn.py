@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import torch
 
-from skt_lib.learning.data import SupportData
+from skt_lib.learning.data import SupportData, normalise
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.learning.sctdn import Sctdn, SctdnConfig, sctdn_loss
 from skt_lib.learning.train import make_batch
@@ -67,3 +67,68 @@ def test_predictor_roundtrip_and_input_checks(tmp_path):
     from skt_lib.errors import DataError
     with pytest.raises(DataError, match="cannot load"):
         SktPredictor.load(tmp_path)
+
+
+class _FixedNet(torch.nn.Module):
+    """A fixed stand-in for Sctdn with outputs known in advance: family 2 (logits), the
+    affordance peaks at the point nearest ``target`` (normalised frame), the deformed
+    trajectory is the aligned one shifted by +0.1 (normalised units) in x."""
+
+    def __init__(self, cfg, target):
+        super().__init__()
+        self.cfg, self.target = cfg, torch.as_tensor(target, dtype=torch.float32)
+
+    def forward(self, xyz_n, scale):
+        b = xyz_n.shape[0]
+        aff = torch.exp(-((xyz_n - self.target) ** 2).sum(-1))
+        contact = xyz_n[torch.arange(b), aff.argmax(-1)]
+        aligned = contact[:, None] + torch.linspace(0, 1, self.cfg.T)[None, :, None] * \
+            torch.tensor([0.3, 0.0, 0.5])
+        return {"logits": torch.tensor([[0.1, -2.0, 3.0, 0.5]]).expand(b, -1), "affordance": aff,
+                "aligned": aligned, "trajectory": aligned + torch.tensor([0.1, 0.0, 0.0])}
+
+
+def test_predictor_inference_path_on_a_fixed_model():
+    """argmax family, contact = the input point under the affordance argmax (in metres, in
+    the support frame), positions de-normalised, frames by the SKT rule, deform switch."""
+    cfg = SctdnConfig(k=4, T=6, n_points=200)
+    rng = np.random.default_rng(4)
+    pts = rng.normal(size=(200, 3)) * 0.04 + [0.1, 0.0, 0.2]
+    c = pts.mean(0)
+    s = np.linalg.norm(pts - c, axis=1).max()
+    target = np.array([0.6, -0.3, 0.2])  # normalised frame
+    k = int(np.argmin(np.linalg.norm((pts - c) / s - target, axis=1)))
+    pred = SktPredictor(_FixedNet(cfg, target))
+    skt = pred.predict(pts)
+    assert skt.family == 2
+    assert np.allclose(skt.contact, pts[k], atol=1e-12)  # a real input point, metres
+    expected = pts[k] + np.outer(np.linspace(0, 1, 6), [0.3 * s, 0.0, 0.5 * s]) + [0.1 * s, 0, 0]
+    assert np.allclose(skt.positions, expected, atol=1e-6)
+    assert skt.affordance.shape == (200,) and int(skt.affordance.argmax()) == k
+    assert np.allclose(skt.frames[:, :3, 3], skt.positions)
+    aligned = pred.predict(pts, deform=False)
+    assert np.allclose(aligned.positions, expected - [0.1 * s, 0, 0], atol=1e-6)
+    # more points than the model takes: resampled by FPS, the contact is still an input point
+    many = np.vstack([pts, rng.normal(size=(50, 3)) * 0.04 + [0.1, 0.0, 0.2]])
+    skt2 = pred.predict(many)
+    assert (np.linalg.norm(many - skt2.contact, axis=1) < 1e-12).any()
+
+
+def test_predictor_matches_the_network_on_a_real_small_model():
+    cfg = SctdnConfig(k=3, T=8, n_points=256)
+    with torch.random.fork_rng():
+        torch.manual_seed(7)
+        model = Sctdn(cfg, torch.randn(3, 8, 3) * 0.02)
+        with torch.no_grad():  # a non-zero deformation head, so trajectory ≠ aligned
+            model.offset.weight.normal_(0, 0.1)
+    pred = SktPredictor(model)
+    pts = _supports()[1].points[0].astype(np.float64)
+    skt = pred.predict(pts)
+    xyz_n, c, s = normalise(pts)
+    with torch.no_grad():
+        out = model(torch.as_tensor(xyz_n[None], dtype=torch.float32),
+                    torch.as_tensor([s], dtype=torch.float32))
+    assert skt.family == int(out["logits"][0].argmax())
+    assert np.array_equal(skt.contact, pts[int(out["affordance"][0].argmax())])
+    assert np.allclose(skt.positions, out["trajectory"][0].double().numpy() * s + c)
+    assert not np.allclose(skt.positions, pred.predict(pts, deform=False).positions)

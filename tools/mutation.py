@@ -1,0 +1,208 @@
+"""Mutation testing (``make mutation``): mutmut on the modules whose tests must be able to fail.
+
+For each module, a scratch copy of the repository under ``.mutation/<name>/`` gets a
+``[tool.mutmut]`` section that mutates only that module and runs only its fast unit tests
+(listed below); ``mutmut run`` executes there, so the working tree is never touched. The
+summary is merged per module into ``reports/tests/mutation.json``::
+
+    {module: {"killed", "survived", "timeout", "score", "equivalent", "no_tests",
+              "seconds", "tests"}}
+
+``score = killed / (killed + survived)``, where ``survived`` includes mutants no selected
+test executes (``no_tests``, also reported apart) and excludes the mutants judged
+equivalent (``EQUIVALENT`` below; listed with the reason in ``reports/tests/mutation.md``).
+``timeout`` mutants count as neither (mutmut reports them apart). Not part of ``.ci/run``:
+minutes per module.
+
+    python tools/mutation.py                      # every module
+    python tools/mutation.py skt_lib/planning/trajectory.py --max-children 2
+"""
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+WORK = ROOT / ".mutation"
+OUT = ROOT / "reports" / "tests"
+
+#: module → the fast unit tests that run against its mutants (pytest node ids or files)
+MODULES: dict[str, list[str]] = {
+    "skt_lib/sim/hanging.py": ["tests/sim/test_hanging.py"],
+    "skt_lib/sim/execute.py": ["tests/sim/test_execute.py"],
+    "skt_lib/planning/collision.py": ["tests/planning/test_collision.py",
+                                      "tests/planning/test_planning.py"],
+    "skt_lib/planning/trajectory.py": ["tests/planning/test_trajectory.py",
+                                       "tests/planning/test_planning.py"],
+    "skt_lib/learning/pointnet2.py": ["tests/learning/test_pointnet2.py"],
+}
+
+#: surviving mutants judged equivalent (no observable behaviour changes): name → why.
+#: Names are mutmut's (``module.x_function__mutmut_N``); re-check them when the module
+#: changes, as mutant numbering follows the source.
+EQUIVALENT: dict[str, str] = {
+    "skt_lib.planning.trajectory.x_keypoint_positions__mutmut_11":
+        'einsum subscripts "nij,j->ni" → "NIJ,J->NI": the same contraction under renamed '
+        "indices.",
+    "skt_lib.planning.trajectory.x_executed_path__mutmut_9":
+        "np.asarray(positions, float) → np.asarray(positions, None): positions only flow into "
+        "skt_frames, which converts to float64 itself (a float32 input is tested there).",
+    "skt_lib.planning.trajectory.x_executed_path__mutmut_11":
+        "np.asarray(positions, float) → np.asarray(positions): as mutant 9.",
+    "skt_lib.learning.pointnet2.x_fps__mutmut_2":
+        "torch.profiler label text only (\"pointnet2.fps\" → \"XXpointnet2.fpsXX\"): no output "
+        "depends on it.",
+    "skt_lib.learning.pointnet2.x_fps__mutmut_3": "profiler label case only, as x_fps__mutmut_2.",
+    "skt_lib.learning.pointnet2.x_ball_query__mutmut_2": "profiler label text only.",
+    "skt_lib.learning.pointnet2.x_ball_query__mutmut_3": "profiler label case only.",
+    "skt_lib.learning.pointnet2.x__fps_torch__mutmut_20":
+        'float("inf") → float("INF"): Python parses both to the same infinity.',
+    "skt_lib.learning.pointnet2.x__fps_torch__mutmut_49":
+        "dist.argmax(-1) → argmax(+1): dist is (B, N), so dim 1 is the last dim.",
+    "skt_lib.learning.pointnet2.x_fps_naive__mutmut_9":
+        ".sum(-1) → .sum(+1) on a (N, 3) difference: dim 1 is the last dim.",
+    "skt_lib.learning.pointnet2.x_fps_naive__mutmut_26": "as x_fps_naive__mutmut_9.",
+    "skt_lib.learning.pointnet2.xǁSetAbstractionǁforward__mutmut_30":
+        "fps(...).to(xyz.device) → .to(None): a no-op either way, fps already returns indices "
+        "on xyz's device (tested on the meta device).",
+    "skt_lib.learning.pointnet2.xǁFeaturePropagationǁforward__mutmut_18":
+        "d.topk(k, dim=-1, ...) → d.topk(k, ...): topk's default dim is -1.",
+    "skt_lib.learning.pointnet2.xǁFeaturePropagationǁforward__mutmut_25":
+        "w = 1/(d + ε) → 2/(d + ε): the weights are normalised on the next line; the factor "
+        "cancels.",
+    "skt_lib.learning.pointnet2.xǁFeaturePropagationǁforward__mutmut_26":
+        "1/(d + 1e-8) → 1/(d − 1e-8): after normalisation the two differ by ~1e-8 relative "
+        "(below float32 resolution); at d = 0 both give that point weight ≈ 1.",
+    **{f"skt_lib.learning.pointnet2.x__fps_torch__mutmut_{i}":
+       "an index/seed tensor (far, rows) created on the CPU instead of xyz's device: PyTorch "
+       "indexing and setitem accept CPU index tensors for tensors on any device, so the "
+       "result is identical (a host→device copy per use, not a different value); the "
+       "tensors the result is built from are device-checked on the meta device."
+       for i in (24, 27, 30, 32)},
+}
+
+
+def _pyproject(module: str, tests: list[str]) -> str:
+    text = (ROOT / "pyproject.toml").read_text()
+    text = re.sub(r"(?ms)^\[tool\.mutmut\].*?(?=^\[|\Z)", "", text)
+    return text + (
+        "\n[tool.mutmut]\n"
+        'source_paths = ["skt_lib"]\n'
+        f"only_mutate = [{json.dumps(module)}]\n"
+        'also_copy = ["stages", "viz"]\n'
+        f"pytest_add_cli_args_test_selection = {json.dumps(tests)}\n"
+        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-q"]\n'
+        "use_git_change_detection = false\n"
+        # torch is not fork-safe: fork each mutant from a clean server, not from the
+        # process that already ran the suite (with one intra-op thread, see below)
+        'process_isolation = "forkserver"\n'
+    )
+
+
+def run_module(module: str, max_children: int, mutmut: str, rerun: bool = True) -> dict:
+    name = module.removesuffix(".py").replace("/", ".")
+    work = WORK / name
+    tests = MODULES[module]
+    if not rerun:  # re-summarise the last run (e.g. after judging more mutants equivalent)
+        last = json.loads((OUT / "mutation.json").read_text())[module]
+        return _summarise(module, name, work, mutmut, last["seconds"], last["tests"])
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    for d in ("skt_lib", "stages", "viz", "tests"):
+        shutil.copytree(ROOT / d, work / d, ignore=shutil.ignore_patterns("__pycache__"))
+    (work / "pyproject.toml").write_text(_pyproject(module, tests))
+    # one thread per mutant process: an OpenMP pool inherited across fork() deadlocks
+    env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1", "OMP_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1"}
+    t0 = time.perf_counter()
+    with (work / "mutmut-run.log").open("w") as log:
+        proc = subprocess.run([mutmut, "run", "--max-children", str(max_children)], cwd=work,
+                              env=env, stdout=log, stderr=subprocess.STDOUT)
+    seconds = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"ERROR: mutmut run failed for {module} (see {work / 'mutmut-run.log'})")
+    return _summarise(module, name, work, mutmut, seconds, tests)
+
+
+def _summarise(module: str, name: str, work: Path, mutmut: str, seconds: float,
+               tests: list[str]) -> dict:
+    res = subprocess.run([mutmut, "results", "--all", "true"], cwd=work, capture_output=True,
+                         text=True, check=True).stdout
+    status = dict(re.findall(r"^\s*(\S+): (.+?)\s*$", res, flags=re.M))
+    status = {k: v for k, v in status.items() if k.startswith(name + ".")}
+    equivalent = sorted(k for k, v in status.items() if v == "survived" and k in EQUIVALENT)
+    count = lambda s: sum(v == s for k, v in status.items() if k not in equivalent)  # noqa: E731
+    # a mutant no selected test executes survives too: counted in ``survived`` (and apart)
+    killed, survived = count("killed"), count("survived") + count("no tests")
+    survivors = sorted(k for k, v in status.items()
+                       if v in ("survived", "no tests") and k not in equivalent)
+    return {"killed": killed, "survived": survived, "timeout": count("timeout"),
+            "score": round(killed / max(1, killed + survived), 4),
+            "equivalent": len(equivalent), "no_tests": count("no tests"),
+            "other": {s: count(s) for s in sorted(set(status.values()))
+                      if s not in ("killed", "survived", "timeout", "no tests")},
+            "seconds": round(seconds, 1), "tests": tests,
+            "_survivors": survivors, "_equivalent": equivalent}
+
+
+def write_reports(results: dict) -> None:
+    OUT.mkdir(parents=True, exist_ok=True)
+    path = OUT / "mutation.json"
+    summary = json.loads(path.read_text()) if path.is_file() else {}
+    details = {}
+    for module, r in results.items():
+        details[module] = (r.pop("_survivors"), r.pop("_equivalent"))
+        summary[module] = r  # each module's entry is replaced whole by its latest run
+    path.write_text(json.dumps(dict(sorted(summary.items())), indent=2) + "\n")
+    md = OUT / "mutation.md"
+    old = md.read_text() if md.is_file() else ""
+    sections = dict(re.findall(r"(?ms)^## `(.+?)`\n(.*?)(?=^## `|\Z)", old))
+    for module, (survivors, equivalent) in details.items():
+        r = summary[module]
+        lines = [f"killed {r['killed']}, survived {r['survived']}, timeout {r['timeout']}, "
+                 f"equivalent {r['equivalent']}, score {r['score']:.3f}; {r['seconds']:.0f} s "
+                 f"wall; tests: {', '.join(f'`{t}`' for t in r['tests'])}.", ""]
+        lines += ["Equivalent (excluded from the score):", ""]
+        lines += [f"- `{k}`: {EQUIVALENT[k]}" for k in equivalent] or ["- none"]
+        lines += ["", "Surviving (not judged equivalent; `mutmut show <name>` in "
+                  f"`.mutation/{module.removesuffix('.py').replace('/', '.')}`):", ""]
+        lines += [f"- `{k}`" for k in survivors] or ["- none"]
+        sections[module] = "\n".join(lines) + "\n\n"
+    head = ("# Mutation testing (`make mutation`)\n\n"
+            "mutmut mutates one module at a time and runs its fast unit tests; "
+            "score = killed / (killed + survived), equivalent mutants excluded (a mutant no "
+            "selected test runs counts as survived). Wall times: the 2-core development "
+            "machine, shared with other jobs. Summary: `mutation.json`. Generated by "
+            "`tools/mutation.py` (`make mutation`, or `MODULES=...` for some).\n\n")
+    md.write_text(head + "".join(f"## `{m}`\n{sections[m]}" for m in sorted(sections)))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("modules", nargs="*", default=list(MODULES), help="modules (default: all)")
+    ap.add_argument("--max-children", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--no-run", action="store_true",
+                    help="re-summarise the last run in .mutation/ (after editing EQUIVALENT)")
+    args = ap.parse_args(argv)
+    unknown = [m for m in args.modules if m not in MODULES]
+    if unknown:
+        print(f"ERROR: no test list for {unknown}; known: {list(MODULES)}", file=sys.stderr)
+        return 2
+    mutmut = shutil.which("mutmut", path=str(Path(sys.executable).parent)) or "mutmut"
+    results = {}
+    for m in args.modules:
+        results[m] = run_module(m, args.max_children, mutmut, rerun=not args.no_run)
+        print(f"{m}: {json.dumps({k: v for k, v in results[m].items() if not k.startswith('_')})}",
+              file=sys.stderr)
+    write_reports(results)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
