@@ -85,6 +85,25 @@ EQUIVALENT: dict[str, str] = {
        "result is identical (a host→device copy per use, not a different value); the "
        "tensors the result is built from are device-checked on the meta device."
        for i in (24, 27, 30, 32)},
+    "skt_lib.sim.hanging.x_supporting_cluster__mutmut_29":
+        'linkage(points, "single") → linkage(points): "single" is linkage\'s default method.',
+    **{f"skt_lib.sim.hanging.x_observe_motion__mutmut_{i}":
+       "a position argument of pb.invertTransform (16–18) or pb.multiplyTransforms (48–53) "
+       "changed, but only the orientation ([1]) of the result is used, and it does not depend "
+       "on the positions (checked bit-for-bit on random quaternions)."
+       for i in (16, 17, 18, 48, 49, 50, 51, 52, 53)},
+    "skt_lib.sim.hanging.x_observe_motion__mutmut_76":
+        "np.clip(abs(dq[3]), 0.0, 1.0) → lower bound None: abs() is never below 0.",
+    "skt_lib.sim.hanging.x_observe_motion__mutmut_77":
+        "np.clip(..., 0.0, 1.0) → upper bound None: differs only if |dq[3]| rounds above 1, "
+        "where arccos gives NaN instead of 0; max(ang, nan) keeps ang (NaN compares false) "
+        "as max(ang, 0.0) does (ang ≥ 0), so the result is the same (only a RuntimeWarning).",
+    "skt_lib.sim.hanging.x_observe_motion__mutmut_84":
+        "upper clip bound 1.0 → 2.0: as x_observe_motion__mutmut_77.",
+    "skt_lib.sim.hanging.x_check_hang__mutmut_70":
+        "x_support > PLATE_X_M → >=: with SUPPORT_POSE_WORLD's x axis (−1, 0, 0) and origin "
+        "x 0.75, x_support = 0.75 − x exactly (Sterbenz) for a double x ≈ 0.739, a multiple of "
+        "2⁻⁵³; PLATE_X_M (0.011) is not, so x_support never equals it and > and >= agree.",
 }
 
 
