@@ -9,7 +9,7 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from skt_lib.geometry.se3 import skt_rotation, transform_points
+from skt_lib.geometry.se3 import GRAVITY_DIR, transform_points
 
 
 def keypoint_positions(poses: np.ndarray, keypoint: np.ndarray) -> np.ndarray:
@@ -45,24 +45,27 @@ def skt_frames(positions: np.ndarray) -> np.ndarray:
     """SE(3) waypoints ``(T, 4, 4)`` for SKT positions ``(T, 3)`` ordered ξ_0 (hang) first.
 
     Each waypoint's x axis is the unit direction of motion toward the hang (from ξ_{i+1} to
-    ξ_i; ξ_{T-1} reuses the next segment), y = x × g, z = x × y."""
+    ξ_i; ξ_{T-1} reuses the next segment), y = x × g, z = x × y (:func:`skt_rotation`,
+    vectorised). Where the rule is undefined (vertical or zero motion) a waypoint takes the
+    rotation of the nearest waypoint where it is defined (the lower index on a tie)."""
     positions = np.asarray(positions, dtype=np.float64)
     motion = positions[:-1] - positions[1:]  # motion arriving at waypoint i (execution order)
     motion = np.vstack([motion, motion[-1:]])
-    out = np.tile(np.eye(4), (len(positions), 1, 1))
-    rots: list[np.ndarray | None] = []
-    for d in motion:
-        try:
-            rots.append(skt_rotation(d))
-        except ValueError:  # vertical or zero motion: the rule is undefined here
-            rots.append(None)
-    known = [i for i, r in enumerate(rots) if r is not None]
-    if not known:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        norm = np.linalg.norm(motion, axis=1)
+        x = motion / norm[:, None]
+        y = np.cross(x, GRAVITY_DIR)
+        y_norm = np.linalg.norm(y, axis=1)
+        known = np.isfinite(norm) & (norm >= 1e-12) & np.isfinite(y_norm) & (y_norm >= 1e-6)
+        y = y / y_norm[:, None]
+    if not known.any():
         raise ValueError("positions: every segment is vertical; SKT rotations are undefined")
-    for i in range(len(positions)):
-        nearest = min(known, key=lambda k: (abs(k - i), k))
-        out[i, :3, :3] = rots[nearest]
-        out[i, :3, 3] = positions[i]
+    rots = np.stack([x, y, np.cross(x, y)], axis=2)
+    k = np.flatnonzero(known)
+    nearest = k[np.abs(k[None, :] - np.arange(len(positions))[:, None]).argmin(1)]
+    out = np.tile(np.eye(4), (len(positions), 1, 1))
+    out[:, :3, :3] = rots[nearest]
+    out[:, :3, 3] = positions
     return out
 
 
