@@ -3,9 +3,11 @@ import pytest
 import torch
 
 from skt_lib.learning.pointnet2 import (
-    FeaturePropagation, SetAbstraction, _fps_torch, ball_query, ball_query_naive, fps, fps_naive,
-    gather,
+    FeaturePropagation, SetAbstraction, _ball_query_kdtree, _ball_query_torch, _fps_torch,
+    ball_query, ball_query_naive, fps, fps_naive, gather,
 )
+
+BALL_QUERIES = [ball_query, _ball_query_kdtree, _ball_query_torch]
 from skt_lib.learning.sctdn import masked_max_pool, traj_distance
 
 
@@ -17,12 +19,16 @@ def test_fps_fast_and_torch_match_naive(n, npoint):
     assert torch.equal(_fps_torch(xyz, npoint), ref)
 
 
-def test_ball_query_matches_naive():
+@pytest.mark.parametrize("bq", BALL_QUERIES)
+def test_ball_query_matches_naive(bq):
+    """Both implementations (CPU KD-tree, any-device dense) against the loops; groups both
+    shorter and longer than nsample (then the nearest are kept), and nsample > N."""
     g = torch.Generator().manual_seed(0)
     xyz = torch.rand(2, 80, 3, generator=g)
     centres = xyz[:, :10]
-    assert torch.equal(ball_query(0.3, 8, xyz, centres), ball_query_naive(0.3, 8, xyz, centres))
-    idx = ball_query(1e-6, 4, xyz, centres)  # only the centre itself
+    for r, k in ((0.3, 8), (0.15, 8), (0.5, 40), (0.9, 100)):
+        assert torch.equal(bq(r, k, xyz, centres), ball_query_naive(r, k, xyz, centres))
+    idx = bq(1e-6, 4, xyz, centres)  # only the centre itself
     assert torch.equal(idx, torch.arange(10).expand(2, 10)[..., None].expand(2, 10, 4))
 
 
@@ -221,10 +227,11 @@ def test_shared_mlps_are_conv_batchnorm_relu_per_layer():
     assert (sa.npoint, sa.radius, sa.nsample) == (8, 0.2, 4)
 
 
-def test_ball_query_boundary_far_from_origin_and_empty_groups():
+@pytest.mark.parametrize("ball_query", BALL_QUERIES)
+def test_ball_query_boundary_far_from_origin_and_empty_groups(ball_query):
     # a point exactly at the radius is inside (d² = r² exactly, in float32 too)
     xyz = torch.tensor([[[0.0, 0, 0], [0.5, 0, 0], [1.0, 0, 0], [0.25, 0, 0]]])
-    expected = torch.tensor([[[0, 1, 3, 0]]])
+    expected = torch.tensor([[[0, 3, 1, 0]]])  # nearest first, padded with the nearest
     assert torch.equal(ball_query(0.5, 4, xyz, xyz[:, :1]), expected)
     assert torch.equal(ball_query_naive(0.5, 4, xyz, xyz[:, :1]), expected)
     # 1 km from the origin the matrix-product distance form loses the centimetres: exact
@@ -261,3 +268,58 @@ def test_fps_routes_cpu_to_open3d_and_other_devices_to_torch(monkeypatch):
     assert fps(x, 6).dtype == torch.int64 and calls == []
     assert fps(x.to("meta"), 6).shape == (2, 6) and calls == [("meta", 6)]
     assert _fps_torch(x, 6).dtype == torch.int64
+
+
+@pytest.mark.parametrize("make", [lambda: SetAbstraction(8, 0.2, 4, [7, 16, 32]).mlp,
+                                  lambda: FeaturePropagation([5, 12, 6]).mlp])
+def test_fused_mlp_is_the_eval_mode_modules(make):
+    """The fused inference path (BatchNorm folded into each 1×1 conv) computes exactly what
+    the conv/BatchNorm/ReLU modules compute in eval mode — with running variances small
+    enough that dropping BatchNorm's eps, or a layer's bias, would show."""
+    from skt_lib.learning.pointnet2 import fused_mlp
+
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        seq = make()
+    g = torch.Generator().manual_seed(4)
+    with torch.no_grad():
+        for m in seq:
+            if isinstance(m, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)):
+                m.running_mean.copy_(torch.randn(m.num_features, generator=g) * 0.1)
+                m.running_var.copy_(torch.rand(m.num_features, generator=g) * 1e-4 + 1e-5)
+                m.weight.copy_(torch.rand(m.num_features, generator=g) + 0.5)
+                m.bias.copy_(torch.randn(m.num_features, generator=g) * 0.1)
+    seq.eval()
+    c_in = seq[0].in_channels
+    x = torch.randn(3, 5, c_in, generator=g) * 0.01
+    with torch.no_grad():
+        fused = fused_mlp(seq, x)
+        if isinstance(seq[0], torch.nn.Conv2d):
+            ref = seq(x.permute(2, 0, 1)[None, :, :, :]).permute(0, 2, 3, 1)[0]
+        else:
+            ref = seq(x.reshape(-1, c_in).T[None])[0].T.reshape(3, 5, -1)
+    assert fused.shape == ref.shape and (ref > 0).any()
+    assert torch.allclose(fused, ref, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("n_coarse", [1, 2, 40])
+def test_three_nn_kdtree_and_dense_match_the_loops(n_coarse):
+    from skt_lib.learning.pointnet2 import three_nn
+
+    g = torch.Generator().manual_seed(n_coarse)
+    fine, coarse = torch.rand(2, 30, 3, generator=g), torch.rand(2, n_coarse, 3, generator=g)
+    k = min(3, n_coarse)
+    ref_d = torch.empty(2, 30, k)
+    ref_i = torch.empty(2, 30, k, dtype=torch.long)
+    for b in range(2):
+        for p in range(30):
+            d = [float(torch.linalg.norm(fine[b, p] - q)) for q in coarse[b]]
+            order = sorted(range(n_coarse), key=d.__getitem__)[:k]
+            ref_i[b, p] = torch.tensor(order)
+            ref_d[b, p] = torch.tensor([d[j] for j in order])
+    for d, i in (three_nn(fine, coarse), three_nn(fine.to("meta"), coarse.to("meta"))):
+        assert d.shape == (2, 30, k) and i.shape == (2, 30, k)
+    d, i = three_nn(fine, coarse)  # CPU: KD-tree
+    assert torch.equal(i, ref_i) and torch.allclose(d, ref_d, atol=1e-6) and d.dtype == torch.float32
+    d2, i2 = torch.cdist(fine, coarse).topk(k, dim=-1, largest=False)  # the dense path's op
+    assert torch.equal(i2, ref_i) and torch.allclose(d2, ref_d, atol=1e-6)
