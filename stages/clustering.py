@@ -4,7 +4,11 @@ Inputs:  data/rrt_skts/skts.parquet, data/mesh_gen/supports.parquet; params comm
 Outputs: data/clustering/labels.parquet (family per support, all splits), templates.npz
          (templates (k, T, 3) float64 relative to ξ_0, template_support_ids (k,) str,
          pca_mean (3T,), pca_components (2, 3T), centres (k, 2), T, k), clustering.rrd;
-         reports/clustering/{metrics.json, report.md, scatter.png, templates.png}.
+         reports/clustering/{metrics.json, report.md, scatter.png, agreement.png, templates.png}.
+
+``skt_family_agreement``: mean, over supports with at least two SKTs (all splits), of the
+share of a support's SKTs whose nearest centre is the support's (majority) family — how far
+the family is a property of the support rather than of the individual SKT.
 """
 
 import logging
@@ -20,7 +24,7 @@ from skt_lib.labels.families import fit_families
 from skt_lib.schemas import LABELS, SKTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from stages._common import parse_args
-from viz.figures import Panel, mesh_gallery, scatter_2d
+from viz.figures import Panel, agreement_scatter, mesh_gallery, scatter_2d
 from viz.report import Report, write_metrics
 from viz.rerun_log import log_scatter_2d, log_strip, recording
 
@@ -50,7 +54,14 @@ def main(argv=None) -> int:
         "pca_mean": fam.pca.mean, "pca_components": fam.pca.components, "centres": fam.centres,
         "T": np.int64(p.T), "k": np.int64(p.k)})
     sizes = [int((fam.train_labels == j).sum()) for j in range(p.k)]
+    multi = [sid for sid in sorted(paths) if len(paths[sid]) >= 2]
+    # None (JSON null) when no support has two SKTs to agree
+    agreement = float(np.mean([fam.agreement[sid] for sid in multi])) if multi else None
+    by_split = {split: float(np.mean([fam.agreement[s] for s in multi if supports.loc[s, "split"] == split]))
+                for split in sorted({supports.loc[s, "split"] for s in multi})}
     metrics = {"k": p.k, "T": p.T, "cluster_sizes": sizes, "silhouette": fam.silhouette,
+               "skt_family_agreement": agreement, "skt_family_agreement_by_split": by_split,
+               "n_supports_agreement": len(multi),
                "n_train_supports": len(train), "n_train_skts": int(len(fam.train_labels)),
                "supports_by_category": [sum(r["category"] == j for r in rows) for j in range(p.k)]}
     write_metrics(rep, metrics)
@@ -67,6 +78,15 @@ def main(argv=None) -> int:
                 f"{', '.join(fam.template_support_ids)}.")
     scatter_2d(fam.train_xy, fam.train_labels, report.figure("scatter.png", "Training SKTs in PCA "
                "space (×: centres), as the paper's Fig. 4b"), "SKT families", fam.centres)
+    xy = np.vstack([fam.skt_embeddings[sid] for sid in sorted(paths)])
+    sup_fam = np.concatenate([[fam.labels[sid]] * len(paths[sid]) for sid in sorted(paths)])
+    own = ((xy[:, None] - fam.centres[None]) ** 2).sum(2).argmin(1)
+    report.text(f"Family agreement (share of a support's SKTs in its majority family, mean over the "
+                f"{len(multi)} supports with ≥ 2 SKTs, all splits): **{agreement if agreement is None else round(agreement, 3)}** "
+                f"({', '.join(f'{k} {v:.3f}' for k, v in by_split.items())}).")
+    agreement_scatter(xy, sup_fam, own, fam.centres, report.figure(
+        "agreement.png", "Every SKT (all splits) coloured by its support's family; red rings: SKTs "
+        "nearer another family's centre"), "Does the support decide the family?")
     report.table(["family", "template support", "train SKTs", "supports (all splits)"],
                  [[j, fam.template_support_ids[j], sizes[j], metrics["supports_by_category"][j]]
                   for j in range(p.k)])

@@ -42,7 +42,8 @@ class Panel:
     meshes: list = field(default_factory=list)
     points: np.ndarray | None = None
     frames: list = field(default_factory=list)
-    lines: list = field(default_factory=list)  # polylines (M, 3), drawn in blue
+    lines: list = field(default_factory=list)  # polylines (M, 3), drawn in blue …
+    line_colors: list = field(default_factory=list)  # … or in these colours, one per line
 
 
 def mesh_gallery(panels: list[Panel], path: str | Path, ncols: int = 4, elev: float = 12.0,
@@ -60,11 +61,12 @@ def mesh_gallery(panels: list[Panel], path: str | Path, ncols: int = 4, elev: fl
             colors = np.clip(np.outer(shade, rgba[:3]), 0, 1)
             ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolors="none",
                                                  alpha=rgba[3]))
-        allv = np.vstack([m[0] for m in panel.meshes])
+        allv = np.vstack([m[0] for m in panel.meshes] + [np.asarray(x).reshape(-1, 3) for x in panel.lines])
         if panel.points is not None:
             ax.scatter(*np.asarray(panel.points).T, color="red", s=18, depthshade=False)
-        for line in panel.lines:
-            ax.plot(*np.asarray(line).T, color="tab:blue", linewidth=1.0)
+        colours = list(panel.line_colors) + ["tab:blue"] * (len(panel.lines) - len(panel.line_colors))
+        for line, colour in zip(panel.lines, colours):
+            ax.plot(*np.asarray(line).T, color=colour, linewidth=1.0)
         for origin, rot in panel.frames:
             for axis, color in zip(rot.T, ("red", "green", "blue")):
                 ax.quiver(*origin, *(0.03 * axis), color=color, linewidth=1.5)
@@ -121,6 +123,24 @@ def scatter_2d(xy: np.ndarray, labels: np.ndarray, path: str | Path, title: str,
     if highlight is not None:
         ax.scatter(highlight[:, 0], highlight[:, 1], marker="x", color="black", s=60)
     ax.legend(*sc.legend_elements(), fontsize=7, title="cluster")
+    ax.set(title=title, xlabel="PC 1", ylabel="PC 2")
+    fig.tight_layout()
+    save(fig, path)
+
+
+def agreement_scatter(xy: np.ndarray, support_family: np.ndarray, own_family: np.ndarray,
+                      centres: np.ndarray, path: str | Path, title: str) -> None:
+    """Every SKT at its PCA embedding, coloured by its *support's* family; an SKT whose own
+    nearest centre is another family is ringed in red (it disagrees with its support)."""
+    fig, ax = plt.subplots(figsize=(5, 4))
+    sc = ax.scatter(xy[:, 0], xy[:, 1], c=support_family, cmap="tab10", s=10)
+    off = support_family != own_family
+    ax.scatter(xy[off, 0], xy[off, 1], facecolors="none", edgecolors="red", s=40, linewidths=0.8,
+               label=f"disagrees with its support ({int(off.sum())}/{len(xy)})")
+    ax.scatter(centres[:, 0], centres[:, 1], marker="x", color="black", s=60)
+    handles, labels = sc.legend_elements()
+    ax.legend(handles + ax.get_legend_handles_labels()[0][-1:],
+              labels + ax.get_legend_handles_labels()[1][-1:], fontsize=7, title="support family")
     ax.set(title=title, xlabel="PC 1", ylabel="PC 2")
     fig.tight_layout()
     save(fig, path)

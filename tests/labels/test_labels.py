@@ -77,3 +77,43 @@ def test_kmeans_and_pca_basics():
         kmeans(x[:2], 3, rng)
     pca = fit_pca(np.column_stack([np.arange(10.0), 2 * np.arange(10.0), np.zeros(10)]))
     assert np.abs(pca.components[0]) == pytest.approx(np.array([1, 2, 0]) / np.sqrt(5))
+
+
+def test_agreement_is_the_share_of_a_supports_skts_in_its_family():
+    """Planted families; support s00 gets one SKT of another family (agreement 3/4), s01 two
+    of four (a tie: the lower family wins, agreement 1/2); every other support agrees fully."""
+    rng = np.random.default_rng(0)
+    kinds = ["straight", "up", "side"]
+    skts = {f"s{i:02d}": [_family(kinds[i % 3], rng) for _ in range(4)] for i in range(24)}
+    skts["s00"][3] = _family("up", rng)  # s00 is "straight"
+    skts["s01"][2:] = [_family("side", rng), _family("side", rng)]  # s01 is "up"
+    train = {sid for i, sid in enumerate(sorted(skts)) if i < 18}
+    fam = fit_families(skts, train, 20, 3, np.random.default_rng(1), 5, 100)
+    assert fam.agreement["s00"] == pytest.approx(0.75) and fam.agreement["s01"] == pytest.approx(0.5)
+    assert all(fam.agreement[s] == 1.0 for s in skts if s not in ("s00", "s01"))
+    assert fam.labels["s00"] == fam.labels["s03"]  # majority: its own family
+    up, side = fam.labels["s04"], fam.labels["s05"]
+    assert fam.labels["s01"] == min(up, side)
+    assert {k: v.shape for k, v in fam.skt_embeddings.items()} == {s: (4, 2) for s in skts}
+
+
+def test_families_cluster_supports_not_skts():
+    """The centres are k-means of the training *supports* (each the mean PCA embedding of its
+    SKTs), with the same generator — not of the individual SKTs, whose random spread let one
+    support's SKTs straddle a boundary. Val/test supports never move the centres."""
+    from skt_lib.labels.families import skt_features
+
+    rng = np.random.default_rng(0)
+    kinds = ["straight", "up", "side"]
+    skts = {f"s{i:02d}": [_family(kinds[i % 3], rng) for _ in range(2 + (i // 3) % 3)]
+            for i in range(24)}
+    train = {sid for i, sid in enumerate(sorted(skts)) if i < 18}
+    fam = fit_families(skts, train, 20, 3, np.random.default_rng(1), 5, 100)
+    ids = sorted(train)
+    feats = {sid: np.stack([skt_features(x, 20) for x in skts[sid]]) for sid in ids}
+    pca = fit_pca(np.vstack([feats[sid] for sid in ids]))
+    means = np.stack([pca.transform(feats[sid]).mean(0) for sid in ids])
+    centres, _ = kmeans(means, 3, np.random.default_rng(1), 5, 100)
+    assert fam.centres == pytest.approx(centres)
+    skts["s23"] = [_family("up", rng) + 0.05 for _ in range(3)]  # a test support far off
+    assert fit_families(skts, train, 20, 3, np.random.default_rng(1), 5, 100).centres == pytest.approx(centres)
