@@ -4,8 +4,11 @@ every SKT independently *as executed*, and measure how test objects fare along i
 
 Start region (support frame, relative to the hanging keypoint ``k``): keypoint at
 ``k + (dx, dy, dz)`` with ``dx ∈ start_dx_m``, ``|dy| ≤ start_dy_m``, ``dz ∈ start_dz_m`` —
-in front of the support (toward the robot) and above it. The orientation along the path is
-the SKT rule's (it follows the motion), so no start orientation is drawn.
+in front of the support (toward the robot) and above it; the path is extended to the
+region's centre (the canonical start) where it can be, so that a support's SKTs are
+comparable as whole paths and their family is decided by the support, not by a random start.
+The orientation along the path is the SKT rule's (it follows the motion), so no start
+orientation is drawn.
 
 Objects: the reference object and every *training* object (``objects.parquet`` split) take
 part in making labels; *test* objects never do — they are only swept along the stored SKT
@@ -150,7 +153,7 @@ def plan_support_skts(task: SktTask) -> dict:
             t0 = time.perf_counter()
             try:
                 path, n_checks = plan_threading(goal, in_start, sample_start, lower, upper, collides,
-                                                 settings, rng)
+                                                 settings, rng, k_goal + (lo_off + hi_off) / 2)
             except ThreadingFailed as err:
                 plan_s.append(time.perf_counter() - t0)
                 failures[err.reason] += 1

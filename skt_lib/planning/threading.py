@@ -23,7 +23,10 @@ checked at exactly the frame execution will give it:
   The frame a pose gets depends on the edge before it (the rule uses the motion *arriving*
   at a waypoint, and execution slerps between waypoint frames), so adding a child re-checks
   its parent's edge with the orientation that child gives it;
-- when a node reaches the start region, the path is shortcut (random, seeded, each candidate
+- when a node reaches the start region, the path is extended straight to the canonical
+  start (when given: the region's centre) where that stretch keeps the limits and is clear,
+  so SKTs of one support start at one point and differ only where the support makes them;
+  then it is shortcut (random, seeded, each candidate
   checked as executed), resampled to the evaluated ``T`` waypoints, and checked once more as
   executed at that resolution; a path that fails there is dropped and a fresh tree grows
   (the same budget). What passes is what ``sim_eval`` executes.
@@ -174,14 +177,16 @@ class _Checker:
 def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
                    sample_start: Callable[[np.random.Generator], np.ndarray],
                    lower: np.ndarray, upper: np.ndarray, collides: Callable[[np.ndarray], bool],
-                   s: ThreadSettings, rng: np.random.Generator) -> tuple[np.ndarray, int]:
+                   s: ThreadSettings, rng: np.random.Generator,
+                   start_point: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Keypoint positions ``(N, 3)``, ξ_0 (the hang) first, vertices at most ``step_m`` apart,
     whose execution (rule frames) is clear for ``collides``; and the checks used.
 
     ``goal``: the hanging keypoint frame (4×4, support frame; its x axis is the threading
     direction). ``in_start(p)``: whether a keypoint position may start the SKT;
     ``sample_start(rng)``: a position in that region. ``collides(frame)``: the probe at a
-    keypoint frame touches the support or wall. Raises :class:`ThreadingFailed`."""
+    keypoint frame touches the support or wall. ``start_point``: the canonical start the
+    path is extended to when it can be (see the module notes). Raises :class:`ThreadingFailed`."""
     turn, pitch = np.radians(s.max_turn_deg), np.radians(s.max_pitch_deg)
     check = _Checker(collides, s)
     a0 = limit_direction(goal[:3, 0], goal[:3, 0], np.pi, pitch)
@@ -199,6 +204,8 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
                 raise
             if path is None:
                 break  # stuck: next release
+            if start_point is not None:
+                path = _snap_start(path, np.asarray(start_point, float), check, s, turn, pitch)
             path = _shortcut(path, check, s, turn, pitch, rng)
             dense = densify(path, s.step_m)[::-1]  # ξ_0 first
             final = executed_path(resample(dense, s.T), s.check_step_m, s.probe_radius_m)
@@ -300,6 +307,21 @@ def _turns_ok(points: np.ndarray, lo: int, hi: int, turn: float, pitch: float) -
     if np.any(np.abs(np.arcsin(np.clip(seg[lo:hi, 2], -1, 1))) > pitch + 1e-9):
         return False
     return all(_angle(seg[k], seg[k + 1]) <= turn + 1e-9 for k in range(max(lo - 1, 0), min(hi, len(seg) - 1)))
+
+
+def _snap_start(path: np.ndarray, start: np.ndarray, check: _Checker, s: ThreadSettings,
+                turn: float, pitch: float) -> np.ndarray:
+    """``path`` (execution order) with a straight stretch from ``start`` to its first vertex
+    prepended, when the stretch keeps the turn and pitch limits and its execution (with the
+    first vertex's frame it changes) is clear; otherwise ``path`` unchanged."""
+    if np.linalg.norm(path[0] - start) < 1e-9:
+        return path
+    head = densify(np.stack([start, path[0]]), s.step_m)[:-1]
+    cand = np.concatenate([head, path])
+    hi = len(head) + 2  # the new stretch and the old first edge, whose start frame changes
+    if _turns_ok(cand, 0, hi, turn, pitch) and check.path(cand, 0, hi):
+        return cand
+    return path
 
 
 def _shortcut(path: np.ndarray, check: _Checker, s: ThreadSettings, turn: float, pitch: float,

@@ -48,7 +48,8 @@ def _scene(tmp_path, tip_rise: float = 0.0):
     return support, ring_mesh, k
 
 
-def _plan(tmp_path, seed: int, tip_rise: float = 0.0, settings: ThreadSettings = SETTINGS):
+def _plan(tmp_path, seed: int, tip_rise: float = 0.0, settings: ThreadSettings = SETTINGS,
+          start: np.ndarray | None = None):
     support, ring_mesh, k = _scene(tmp_path, tip_rise)
     hang = np.eye(4)
     hang[:3, 3] = [0.06, 0.0, PEG_R + 0.001 - k[2, 3]]  # aperture top 1 mm above the peg
@@ -63,7 +64,8 @@ def _plan(tmp_path, seed: int, tip_rise: float = 0.0, settings: ThreadSettings =
         path, n = plan_threading(
             goal, lambda q: bool(np.all(q - goal[:3, 3] >= lo) and np.all(q - goal[:3, 3] <= hi)),
             lambda g: goal[:3, 3] + g.uniform(lo, hi), np.array([0.0, -0.1, -0.1]),
-            np.array([0.3, 0.1, 0.2]), collides, settings, np.random.default_rng(seed))
+            np.array([0.3, 0.1, 0.2]), collides, settings, np.random.default_rng(seed),
+            None if start is None else goal[:3, 3] + start)
     return path, n, goal, support, ring_mesh, k, (lo, hi)
 
 
@@ -135,3 +137,24 @@ def test_quat_matches_scipy_and_limit_direction_bounds_turn_and_pitch():
     # within the limits a direction is kept as is
     d = np.array([-1.0, 0.1, 0.1]) / np.linalg.norm([-1.0, 0.1, 0.1])
     assert limit_direction(d, prev, np.radians(30), np.radians(60)) == pytest.approx(d)
+
+
+def test_paths_end_at_the_canonical_start_when_given(tmp_path):
+    """With a canonical start (here the start region's centre) every path begins exactly
+    there (execution order), stays clear as executed and within the turn/pitch limits; two
+    seeds then differ only in between, not at their free end."""
+    centre = np.array([0.11, 0.0, 0.04])  # the middle of _plan's start region
+    ends = []
+    for seed in (3, 4):
+        path, _, goal, support, ring_mesh, k, _ = _plan(tmp_path, seed, 0.02, start=centre)
+        assert path[-1] == pytest.approx(goal[:3, 3] + centre, abs=1e-12)
+        frames = executed_path(resample(path, SETTINGS.T), 0.001, 0.06)
+        assert MeshClearance(support, ring_mesh, 0.002).clearance(frames @ invert(k)) > 0
+        seg = np.diff(path[::-1], axis=0)
+        seg /= np.linalg.norm(seg, axis=1, keepdims=True)
+        turns = np.degrees(np.arccos(np.clip(np.sum(seg[1:] * seg[:-1], axis=1), -1, 1)))
+        assert turns.max() <= SETTINGS.max_turn_deg + 1e-6
+        ends.append(path[-1])
+    assert np.array_equal(ends[0], ends[1])
+    free = _plan(tmp_path, 3, 0.02)[0]  # without it the tree stops wherever it entered the region
+    assert not np.allclose(free[-1], ends[0])
