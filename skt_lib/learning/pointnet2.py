@@ -73,8 +73,19 @@ def ball_query(radius: float, nsample: int, xyz: torch.Tensor, centres: torch.Te
         return _ball_query(radius, nsample, xyz, centres)
 
 
+#: Below this many centre × point pairs per cloud the dense path is cheaper than building a
+#: KD-tree (both give the same result).
+KDTREE_MIN_PAIRS = 20000
+
+
+def _use_kdtree(*tensors: torch.Tensor) -> bool:
+    a, b = tensors[0], tensors[1]
+    return (a.device.type == "cpu" and not any(t.requires_grad for t in tensors)
+            and a.shape[1] * b.shape[1] >= KDTREE_MIN_PAIRS)
+
+
 def _ball_query(radius, nsample, xyz, centres):
-    if xyz.device.type == "cpu" and not xyz.requires_grad:
+    if _use_kdtree(xyz, centres):
         return _ball_query_kdtree(radius, nsample, xyz, centres)
     return _ball_query_torch(radius, nsample, xyz, centres)
 
@@ -205,10 +216,10 @@ class SetAbstraction(nn.Module):
 
 def three_nn(xyz_fine: torch.Tensor, xyz_coarse: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Distances and indices ``(B, N, k)``, k = min(3, S), of each fine point's nearest coarse
-    points, nearest first: a KD-tree per cloud on CPU tensors, the dense distance matrix on
-    other devices."""
+    points, nearest first: a KD-tree per cloud on CPU tensors (large clouds), the dense
+    distance matrix otherwise."""
     k = min(3, xyz_coarse.shape[1])
-    if xyz_fine.device.type != "cpu" or xyz_fine.requires_grad or xyz_coarse.requires_grad:
+    if not _use_kdtree(xyz_fine, xyz_coarse):
         return torch.cdist(xyz_fine, xyz_coarse).topk(k, dim=-1, largest=False)
     fine, coarse = xyz_fine.numpy().astype(np.float64), xyz_coarse.numpy().astype(np.float64)
     dist = np.empty(fine.shape[:2] + (k,))
