@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: env repro test bench mutation clean-env
+.PHONY: env repro test bench mutation train-diagnostics clean-env
 
 env: $(STAMP)
 
@@ -45,6 +45,11 @@ mutation: $(STAMP)
 	@# tests; summary in reports/tests/mutation.{json,md}. Minutes per module; not in .ci/run.
 	@# One module: make mutation MODULES=skt_lib/planning/trajectory.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python tools/mutation.py $(MODULES)
+
+train-diagnostics: $(STAMP)
+	@# short seeded SCTDN runs (overfit one batch, learning curve, contact term, train vs
+	@# val) into reports/train/diagnostics.{json,md}; needs the artifacts of `make repro`
+	$(BIN)/python tools/train_diagnostics.py
 
 clean-env:
 	rm -rf $(VENV)

@@ -73,12 +73,14 @@ def render_bench(params, root: Path, per_level: int, tmp: Path) -> dict:
             "render_total_ms_per_view_median": float(np.median(total_ms))}
 
 
-def sctdn_bench(root: Path, n: int = 50) -> dict:
-    """SCTDN inference, batch 1, N points in → SKT out, model loaded, one process."""
+def sctdn_bench(root: Path, n: int = 100, warmup: int = 10) -> dict:
+    """SCTDN inference, batch 1, N points in → SKT out, model loaded, one process; the median
+    of ``n`` predictions on different views after ``warmup`` untimed ones."""
     predictor = SktPredictor.load(root / "train")
     clouds = [read_npz(f, RENDER_SPEC)["points"] for f in sorted((root / "render_views").glob("*.npz"))[:5]]
-    views = [c[v] for c in clouds for v in range(0, c.shape[0], 4)][:n]
-    predictor.predict(views[0])  # warm-up
+    views = [c[v] for c in clouds for v in range(0, c.shape[0], 2)][:n]
+    for cloud in views[:warmup]:
+        predictor.predict(cloud)
     times = []
     for cloud in views:
         t0 = time.perf_counter()

@@ -21,9 +21,12 @@ from skt_lib.io import read_npz
 from skt_lib.learning.data import load_supports
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.learning.sctdn import SctdnConfig
-from skt_lib.learning.train import TrainSettings, train_sctdn
+from skt_lib.geometry.export import read_obj
+from skt_lib.io import read_table
+from skt_lib.learning.train import TrainSettings, predict_items, summarise, train_sctdn
+from skt_lib.schemas import SUPPORTS
 from stages._common import parse_args
-from viz.figures import curves
+from viz.figures import Panel, curves, mesh_gallery
 from viz.report import Report, write_metrics
 
 log = logging.getLogger("train")
@@ -43,18 +46,20 @@ def main(argv=None) -> int:
         raise DataError(f"{root / 'mesh_gen'}: {len(train)} training and {len(val)} validation "
                         "supports with labels; model selection needs both (set "
                         "mesh_gen.n_val_per_level ≥ 1) — it never selects on training supports")
-    cfg = SctdnConfig(k=k, T=T, n_points=supports[0].points.shape[1])
-    settings = TrainSettings(p.epochs, p.views_per_epoch, p.batch_size, p.lr, p.weight_decay,
-                             tuple(p.val_views))
+    cfg = SctdnConfig(k=k, T=T, n_points=supports[0].points.shape[1], feat_dim=p.feat_dim,
+                      lstm_hidden=p.lstm_hidden, centres=p.centres, nsample=p.nsample)
+    settings = TrainSettings(p.epochs, p.views_per_epoch, p.batch_size, p.lr, p.lr_final_ratio,
+                             p.weight_decay, tuple(p.val_views), p.contact_weight)
     history: list[dict] = []
     t0 = time.perf_counter()
     with Live(dir=str(rep / "live"), save_dvc_exp=False, dvcyaml=None, report=None) as live:
         def on_epoch(epoch, metrics):
             for name, value in metrics.items():
-                live.log_metric(name, value)
+                if value is not None:  # no rate where nothing was measured (see summarise)
+                    live.log_metric(name, value)
             live.next_step()
             history.append(metrics)
-            log.info("epoch %d: %s", epoch, {k: round(v, 4) for k, v in metrics.items()})
+            log.info("epoch %d: %s", epoch, {k: v if v is None else round(v, 4) for k, v in metrics.items()})
 
         model, best = train_sctdn(cfg, tz["templates"], train, val, settings,
                                   params.common.seed, on_epoch)
@@ -72,8 +77,13 @@ def main(argv=None) -> int:
         for _ in range(5):
             predictor.predict(sample)
     profile = prof.key_averages().table(sort_by="cpu_time_total", row_limit=12)
+    curve = [h["val_traj_l2_mm"] for h in history]
+    last5 = float(np.mean(curve[-5:]))
     metrics = {**best, "n_train_supports": len(train), "n_val_supports": len(val),
-               "epochs": p.epochs, "inference_ms_median": 1000 * float(np.median(times))}
+               "epochs": p.epochs, "inference_ms_median": 1000 * float(np.median(times)),
+               "best_epoch": int(np.argmin(curve)), "val_traj_l2_mm_last5_mean": last5,
+               # settled: the chosen epoch is not a lucky dip of a still-swinging curve
+               "val_curve_settled": bool(best["val_traj_l2_mm"] >= 0.9 * last5)}
     write_metrics(rep, metrics)
 
     report = Report("train", rep)
@@ -92,6 +102,7 @@ def main(argv=None) -> int:
     curves(history, ["train_loss", "train_traj", "train_aff", "train_cls"],
            report.figure("train_loss.png", "Training losses (normalised cloud units, not mm)"),
            "training", "loss (normalised units)")
+    _breakdown(report, model, val, p.val_views, root)
     report.text(f"Inference (batch 1, {cfg.n_points} points in → SKT out, model loaded): median "
                 f"{metrics['inference_ms_median']:.1f} ms. Curves: `dvc plots show` "
                 f"(reports/train/live/plots/metrics).")
@@ -101,11 +112,45 @@ def main(argv=None) -> int:
     return 0
 
 
+def _breakdown(report: Report, model, val, views, root: Path) -> None:
+    """Validation figures per family and per level (best model), and one validation support
+    per family drawn with its ground truth, the aligned template and the prediction."""
+    items = [(s, int(v)) for s in val for v in views]
+    per = predict_items(model, items)
+    rows = []
+    for key, name in ((lambda s: f"family {s.family}", "family"), (lambda s: s.level, "level")):
+        groups = sorted({key(s) for s, _ in items})
+        for g in groups:
+            m = np.array([key(s) == g for s, _ in items])
+            sub = summarise({k: v[m] for k, v in per.items()})
+            rows.append([name, g, int(m.sum()), sub["val_traj_l2_mm"], sub["val_template_only_l2_mm"],
+                         sub["val_cls_acc"], sub["val_contact_within_1cm_rate"]])
+    report.heading("Validation by family and by level (best epoch)")
+    report.table(["by", "group", "views", "SCTDN mm", "template-only mm", "cls acc",
+                  "contact ≤ 1 cm"], rows)
+    supports = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")
+    panels, seen = [], set()
+    for i, (s, v) in enumerate(items):
+        if s.family in seen:
+            continue
+        seen.add(s.family)
+        (mesh,) = read_obj(root / "mesh_gen" / supports.loc[s.support_id, "mesh_path"])
+        panels.append(Panel(f"{s.support_id} (family {s.family}, {s.level}, view {v}): "
+                            f"{per['traj_mm'][i]:.0f} mm",
+                            [(mesh.vertices, mesh.faces, (0.35, 0.22, 0.12, 1.0))],
+                            points=np.stack([per["contact_m"][i], s.contact]),
+                            lines=[*s.skts, per["aligned_m"][i], per["trajectory_m"][i]],
+                            line_colors=["0.6"] * len(s.skts) + ["tab:orange", "tab:blue"]))
+    mesh_gallery(panels, report.figure("val_predictions.png", "One validation support per family: "
+                 "ground-truth SKTs (grey), aligned template (orange), SCTDN prediction (blue); red: "
+                 "predicted and true contact"))
+
+
 def _unit(metric: str) -> str:
     """The unit of a training/validation figure, for the report."""
     if metric.endswith("_mm"):
         return "mm"
-    if metric == "val_cls_acc":
+    if metric in ("val_cls_acc", "val_contact_within_1cm_rate"):
         return "fraction"
     if metric == "val_affordance_mse":
         return "affordance² (unitless)"

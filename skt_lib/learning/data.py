@@ -22,6 +22,7 @@ class SupportData:
     affordance: np.ndarray  # (V, N) float32
     skts: np.ndarray  # (G, T, 3) float64 ground-truth SKTs resampled to T, ξ_0 first
     contact: np.ndarray  # (3,) support contact point
+    level: str = ""  # difficulty level (easy … very_hard), for per-level reports
 
 
 def load_supports(root: Path, T: int) -> list[SupportData]:
@@ -37,7 +38,8 @@ def load_supports(root: Path, T: int) -> list[SupportData]:
         gt = np.stack([resample(np.stack(k), T) for k in by_support[row.support_id]["keypoints"]])
         out.append(SupportData(row.support_id, row.split, int(row.category), cloud["points"],
                                aff["affordance"], gt,
-                               np.asarray(contacts.loc[row.support_id, "contact_support"])))
+                               np.asarray(contacts.loc[row.support_id, "contact_support"]),
+                               row.difficulty))
     return out
 
 

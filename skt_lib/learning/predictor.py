@@ -57,7 +57,7 @@ class SktPredictor:
             torch.save(self.model.state_dict(), tmp)
         write_text_atomic(d / "sctdn.json", self.cfg.to_json() + "\n")
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def predict(self, points: np.ndarray, deform: bool = True) -> Skt:
         """The SKT for a cloud ``(N, 3)``; ``deform=False`` returns the predicted family's
         template aligned at the predicted contact point (the paper's template-only row)."""

@@ -23,9 +23,19 @@ class SctdnConfig:
     k: int
     T: int
     n_points: int = 1000
-    feat_dim: int = 128
-    lstm_hidden: int = 128
+    feat_dim: int = 64
+    lstm_hidden: int = 64
     aff_threshold: float = 0.1
+    centres: tuple[int, int, int] | None = None  # set-abstraction centres per level (None: N/4, N/16, N/64)
+    nsample: int = 16  # neighbours grouped per centre
+
+    def __post_init__(self):
+        n = self.n_points
+        centres = self.centres or (max(n // 4, 3), max(n // 16, 3), max(n // 64, 3))
+        object.__setattr__(self, "centres", tuple(int(c) for c in centres))
+        if not self.n_points >= self.centres[0] >= self.centres[1] >= self.centres[2] >= 3:
+            raise ValueError(f"centres: need n_points ≥ c1 ≥ c2 ≥ c3 ≥ 3, got {self.centres} "
+                             f"for n_points {self.n_points}")
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=2, sort_keys=True)
@@ -42,14 +52,14 @@ class Sctdn(nn.Module):
             raise ValueError(f"templates: expected ({cfg.k}, {cfg.T}, 3), got {tuple(templates.shape)}")
         self.cfg = cfg
         self.register_buffer("templates", templates.float())  # metres, relative to ξ_0
-        n = cfg.n_points  # centres per level: N/2, N/8, N/32 (1000 → 500, 125, 31)
-        self.sa1 = SetAbstraction(n // 2, 0.1, 32, [3, 32, 32, 64])
-        self.sa2 = SetAbstraction(n // 8, 0.2, 32, [64 + 3, 64, 64, 128])
-        self.sa3 = SetAbstraction(max(n // 32, 4), 0.4, 32, [128 + 3, 128, 128, 256])
+        c1, c2, c3 = cfg.centres
+        self.sa1 = SetAbstraction(c1, 0.1, cfg.nsample, [3, 32, 32, 64])
+        self.sa2 = SetAbstraction(c2, 0.2, cfg.nsample, [64 + 3, 64, 64, 128])
+        self.sa3 = SetAbstraction(c3, 0.4, cfg.nsample, [128 + 3, 128, 128, 256])
         self.sa_global = SetAbstraction(None, 0.0, 0, [256 + 3, 256, 256])
         self.fp3 = FeaturePropagation([256 + 128, 256, 128])
         self.fp2 = FeaturePropagation([128 + 64, 128, 128])
-        self.fp1 = FeaturePropagation([128, 128, cfg.feat_dim])
+        self.fp1 = FeaturePropagation([128, cfg.feat_dim, cfg.feat_dim])
         self.cls_head = nn.Sequential(nn.Linear(256, 128), nn.ReLU(), nn.Dropout(0.3), nn.Linear(128, cfg.k))
         self.aff_head = nn.Conv1d(cfg.feat_dim, 1, 1)
         self.wp_mlp = nn.Sequential(nn.Linear(3, 64), nn.ReLU(), nn.Linear(64, 32), nn.ReLU(),
@@ -70,7 +80,8 @@ class Sctdn(nn.Module):
         f2 = self.fp3(l2_xyz, l3_xyz, l2, l3)
         f1 = self.fp2(l1_xyz, l2_xyz, l1, f2)
         feats = self.fp1(xyz_n, l1_xyz, None, f1)  # (B, C, N)
-        aff = torch.sigmoid(self.aff_head(feats))[:, 0]  # (B, N)
+        aff_logits = self.aff_head(feats)[:, 0]  # (B, N)
+        aff = torch.sigmoid(aff_logits)
         if family is None:
             family = logits.argmax(-1)
         if contact_n is None:
@@ -79,7 +90,8 @@ class Sctdn(nn.Module):
         shape = masked_max_pool(feats, aff, self.cfg.aff_threshold)
         x = torch.cat([self.wp_mlp(aligned), shape[:, None].expand(-1, aligned.shape[1], -1)], -1)
         traj = aligned + self.offset(self.lstm(x)[0])
-        return {"logits": logits, "affordance": aff, "aligned": aligned, "trajectory": traj}
+        return {"logits": logits, "affordance": aff, "affordance_logits": aff_logits,
+                "aligned": aligned, "trajectory": traj}
 
 
 def masked_max_pool(feats: torch.Tensor, aff: torch.Tensor, threshold: float) -> torch.Tensor:
@@ -98,9 +110,17 @@ def traj_distance(pred: torch.Tensor, gt: torch.Tensor, valid: torch.Tensor) -> 
     return d.masked_fill(~valid, float("inf")).min(-1).values
 
 
-def sctdn_loss(out, gt, valid, aff_label, family, w_aff: float = 0.1, w_cls: float = 0.1):
-    """L = L_T + 0.1·L_a + 0.1·L_c; cross-entropy on logits (not on softmax outputs)."""
+def sctdn_loss(out, gt, valid, aff_label, family, contact_target, w_aff: float = 0.1,
+               w_cls: float = 0.1, w_contact: float = 0.1):
+    """L = L_T + 0.1·L_a + 0.1·L_c + 0.1·L_p; cross-entropy on logits (not on softmax outputs).
+
+    L_p (not in the paper) is the cross-entropy between the softmax over the cloud's points of
+    the affordance logits and ``contact_target (B, N)``, a distribution peaked at the true
+    contact: the template is aligned at the affordance's argmax, and the per-point MSE of L_a
+    alone left that argmax more than 1 cm from the contact in most validation views."""
     l_t = traj_distance(out["trajectory"], gt, valid).mean()
     l_a = F.mse_loss(out["affordance"], aff_label)
     l_c = F.cross_entropy(out["logits"], family)
-    return l_t + w_aff * l_a + w_cls * l_c, {"traj": l_t.item(), "aff": l_a.item(), "cls": l_c.item()}
+    l_p = -(contact_target * F.log_softmax(out["affordance_logits"], -1)).sum(-1).mean()
+    loss = l_t + w_aff * l_a + w_cls * l_c + w_contact * l_p
+    return loss, {"traj": l_t.item(), "aff": l_a.item(), "cls": l_c.item(), "contact": l_p.item()}

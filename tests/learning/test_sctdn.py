@@ -24,19 +24,25 @@ def test_overfits_one_batch():
     sup = _supports()
     cfg = SctdnConfig(k=2, T=8, n_points=256)
     b = make_batch([(s, 0) for s in sup])
-    losses = []
+    parts = []
     with torch.random.fork_rng():  # dropout draws from torch's RNG: isolate and seed it
         torch.manual_seed(0)
         model = Sctdn(cfg, torch.zeros(2, 8, 3))
         opt = torch.optim.Adam(model.parameters(), 3e-3)
         for _ in range(250):
             out = model(b["xyz"], b["scale"], b["family"], b["contact"])
-            loss, _ = sctdn_loss(out, b["gt"], b["valid"], b["aff"], b["family"])
+            loss, part = sctdn_loss(out, b["gt"], b["valid"], b["aff"], b["family"], b["contact_target"])
             opt.zero_grad()
             loss.backward()
             opt.step()
-            losses.append(float(loss))
-    assert losses[-1] < losses[0] / 10
+            parts.append(part)
+    # the trajectory error goes (nearly) to zero; the contact cross-entropy more than halves
+    # its distance to its floor, the entropy of the target distribution
+    assert parts[-1]["traj"] < parts[0]["traj"] / 10
+    t = b["contact_target"]
+    entropy = float(-(t * torch.log(t.clamp_min(1e-30))).sum(-1).mean())
+    assert parts[-1]["contact"] - entropy < (parts[0]["contact"] - entropy) / 2
+    assert parts[-1]["cls"] < 0.05
 
 
 def test_starts_at_the_template_and_rejects_bad_templates():
@@ -132,3 +138,20 @@ def test_predictor_matches_the_network_on_a_real_small_model():
     assert np.array_equal(skt.contact, pts[int(out["affordance"][0].argmax())])
     assert np.allclose(skt.positions, out["trajectory"][0].double().numpy() * s + c)
     assert not np.allclose(skt.positions, pred.predict(pts, deform=False).positions)
+
+
+def test_contact_target_peaks_at_the_point_nearest_the_contact():
+    """A distribution per cloud, Gaussian in the distance beyond the nearest point's: its
+    argmax is the nearest point whether or not the contact itself was seen, and points σ
+    farther than that get e^{-1/2} of its weight."""
+    from skt_lib.learning.train import CONTACT_SIGMA_M, contact_target
+
+    pts = np.zeros((2, 4, 3))
+    pts[:, :, 0] = [0.0, 0.01, 0.02, 0.03]
+    contact = np.array([[0.011, 0.0, 0.0], [0.5, 0.0, 0.0]])  # seen; far off (not seen)
+    t = contact_target(pts, contact)
+    assert t.shape == (2, 4) and np.allclose(t.sum(1), 1.0) and (t >= 0).all()
+    assert t.argmax(1).tolist() == [1, 3]
+    d = np.abs(pts[0, :, 0] - 0.011)
+    assert t[0] / t[0, 1] == pytest.approx(np.exp(-0.5 * ((d - d.min()) / CONTACT_SIGMA_M) ** 2))
+    assert t[1, 3] > 0.8  # the nearest point carries the weight when the contact is far
