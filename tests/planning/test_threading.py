@@ -69,6 +69,18 @@ def _plan(tmp_path, seed: int, tip_rise: float = 0.0, settings: ThreadSettings =
     return path, n, goal, support, ring_mesh, k, (lo, hi)
 
 
+def _assert_clear_and_within_limits(path, support, ring_mesh, k):
+    """The independent mesh check of the ring as executed at T says clear, and the turn and
+    pitch limits hold between consecutive edges (execution order)."""
+    frames = executed_path(resample(path, SETTINGS.T), 0.001, 0.06)
+    assert MeshClearance(support, ring_mesh, 0.002).clearance(frames @ invert(k)) > 0
+    seg = np.diff(path[::-1], axis=0)
+    seg /= np.linalg.norm(seg, axis=1, keepdims=True)
+    turns = np.degrees(np.arccos(np.clip(np.sum(seg[1:] * seg[:-1], axis=1), -1, 1)))
+    assert turns.max() <= SETTINGS.max_turn_deg + 1e-6
+    assert np.degrees(np.abs(np.arcsin(seg[:, 2]))).max() <= SETTINGS.max_pitch_deg + 1e-6
+
+
 @pytest.mark.parametrize("tip_rise", [0.0, 0.02])
 def test_planned_path_is_clear_as_executed(tmp_path, tip_rise):
     path, n, goal, support, ring_mesh, k, (lo, hi) = _plan(tmp_path, 3, tip_rise)
@@ -80,15 +92,7 @@ def test_planned_path_is_clear_as_executed(tmp_path, tip_rise):
     # the last stretch arrives along the hanging keypoint's x axis (here −x, toward the wall)
     assert skt_frames(path)[0][:3, :3] == pytest.approx(skt_rotation(goal[:3, 0]), abs=1e-9)
     assert np.all(path[-1] - goal[:3, 3] >= lo - 1e-9) and np.all(path[-1] - goal[:3, 3] <= hi + 1e-9)
-    # the independent mesh check of the ring as executed at T says clear
-    frames = executed_path(resample(path, SETTINGS.T), 0.001, 0.06)
-    assert MeshClearance(support, ring_mesh, 0.002).clearance(frames @ invert(k)) > 0
-    # turn and pitch limits between consecutive edges (execution order)
-    seg = np.diff(path[::-1], axis=0)
-    seg /= np.linalg.norm(seg, axis=1, keepdims=True)
-    turns = np.degrees(np.arccos(np.clip(np.sum(seg[1:] * seg[:-1], axis=1), -1, 1)))
-    assert turns.max() <= SETTINGS.max_turn_deg + 1e-6
-    assert np.degrees(np.abs(np.arcsin(seg[:, 2]))).max() <= SETTINGS.max_pitch_deg + 1e-6
+    _assert_clear_and_within_limits(path, support, ring_mesh, k)
     if tip_rise:  # over the upturned tip: the path climbs above it
         assert path[:, 2].max() > tip_rise
 
@@ -148,12 +152,7 @@ def test_paths_end_at_the_canonical_start_when_given(tmp_path):
     for seed in (3, 4):
         path, _, goal, support, ring_mesh, k, _ = _plan(tmp_path, seed, 0.02, start=centre)
         assert path[-1] == pytest.approx(goal[:3, 3] + centre, abs=1e-12)
-        frames = executed_path(resample(path, SETTINGS.T), 0.001, 0.06)
-        assert MeshClearance(support, ring_mesh, 0.002).clearance(frames @ invert(k)) > 0
-        seg = np.diff(path[::-1], axis=0)
-        seg /= np.linalg.norm(seg, axis=1, keepdims=True)
-        turns = np.degrees(np.arccos(np.clip(np.sum(seg[1:] * seg[:-1], axis=1), -1, 1)))
-        assert turns.max() <= SETTINGS.max_turn_deg + 1e-6
+        _assert_clear_and_within_limits(path, support, ring_mesh, k)
         ends.append(path[-1])
     assert np.array_equal(ends[0], ends[1])
     free = _plan(tmp_path, 3, 0.02)[0]  # without it the tree stops wherever it entered the region
