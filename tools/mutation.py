@@ -55,6 +55,15 @@ EQUIVALENT: dict[str, str] = {
         "skt_frames, which converts to float64 itself (a float32 input is tested there).",
     "skt_lib.planning.trajectory.x_executed_path__mutmut_11":
         "np.asarray(positions, float) → np.asarray(positions): as mutant 9.",
+    **{f"skt_lib.planning.trajectory.x_skt_frames__mutmut_{i}":
+       "np.errstate argument dropped/None: only whether numpy warns on 0/0 for a zero or "
+       "vertical segment changes; those rows are masked out by `known` either way."
+       for i in (15, 16, 17, 18)},
+    "skt_lib.planning.trajectory.x_skt_frames__mutmut_47":
+        "norm >= 1e-12 → > 1e-12: differs only for a segment of length exactly 1e-12 m.",
+    "skt_lib.planning.trajectory.x_skt_frames__mutmut_50":
+        "y_norm >= 1e-6 → > 1e-6: differs only at exactly 1e-6 horizontal share (as the "
+        "scalar skt_rotation's threshold).",
     "skt_lib.learning.pointnet2.x_fps__mutmut_2":
         "torch.profiler label text only (\"pointnet2.fps\" → \"XXpointnet2.fpsXX\"): no output "
         "depends on it.",

@@ -323,3 +323,72 @@ def test_three_nn_kdtree_and_dense_match_the_loops(n_coarse):
     assert torch.equal(i, ref_i) and torch.allclose(d, ref_d, atol=1e-6) and d.dtype == torch.float32
     d2, i2 = torch.cdist(fine, coarse).topk(k, dim=-1, largest=False)  # the dense path's op
     assert torch.equal(i2, ref_i) and torch.allclose(d2, ref_d, atol=1e-6)
+
+
+def test_training_path_equals_the_fused_inference_path():
+    """SetAbstraction/FeaturePropagation in training mode run the conv modules; in eval mode
+    the fused matmuls. With BatchNorm held on its running statistics (the only thing that
+    differs by design) both paths compute the same function, each layer included."""
+    g = torch.Generator().manual_seed(7)
+    xyz = torch.rand(2, 60, 3, generator=g) - 0.5
+    feats = torch.randn(2, 4, 60, generator=g)
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        sa = _randomise(SetAbstraction(12, 0.3, 8, [7, 16, 24]), 1)
+        sa_g = _randomise(SetAbstraction(None, 0.0, 0, [7, 16]), 3)
+        fp = _randomise(FeaturePropagation([24 + 4, 16, 8]), 2)
+    with torch.no_grad():
+        ref_xyz, ref = sa(xyz, feats)
+        ref_g = sa_g(xyz, feats)[1]
+        ref_fp = fp(xyz, ref_xyz, feats, ref)
+        for m in (sa, sa_g, fp):
+            m.train()
+            for bn in m.modules():
+                if isinstance(bn, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)):
+                    bn.eval()
+        new_xyz, out = sa(xyz, feats)
+        assert torch.equal(new_xyz, ref_xyz) and torch.allclose(out, ref, atol=1e-5)
+        assert torch.allclose(sa_g(xyz, feats)[1], ref_g, atol=1e-5)
+        assert torch.allclose(fp(xyz, ref_xyz, feats, ref), ref_fp, atol=1e-5)
+
+
+@pytest.mark.parametrize("pairs", [0, 10**9])
+def test_kdtree_and_dense_routes_agree_inside_the_network(monkeypatch, pairs):
+    """The same SA/FP outputs whichever route (KD-tree or dense) the size threshold picks."""
+    from skt_lib.learning import pointnet2
+
+    g = torch.Generator().manual_seed(9)
+    xyz = torch.rand(1, 200, 3, generator=g) - 0.5
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        sa = _randomise(SetAbstraction(40, 0.25, 8, [3, 16]), 1)
+        fp = _randomise(FeaturePropagation([16, 8]), 2)
+    with torch.no_grad():
+        ref_xyz, ref = sa(xyz, None)
+        ref_fp = fp(xyz, ref_xyz, None, ref)
+        monkeypatch.setattr(pointnet2, "KDTREE_MIN_PAIRS", pairs)
+        new_xyz, out = sa(xyz, None)
+        assert torch.allclose(out, ref, atol=1e-6)
+        # the dense 3-NN uses cdist's matrix-product form: a fine point on a coarse point gets
+        # a distance of ~1e-4 there, 0 on the KD-tree — the interpolation differs by that much
+        assert torch.allclose(fp(xyz, new_xyz, None, out), ref_fp, atol=1e-3)
+
+
+def test_the_size_threshold_routes_large_cpu_inputs_to_the_kdtree(monkeypatch):
+    from skt_lib.learning import pointnet2
+
+    calls = []
+    real_bq, real_nn = pointnet2._ball_query_kdtree, pointnet2.cKDTree
+    monkeypatch.setattr(pointnet2, "_ball_query_kdtree",
+                        lambda *a: calls.append("bq") or real_bq(*a))
+    monkeypatch.setattr(pointnet2, "cKDTree", lambda *a, **k: calls.append("tree") or real_nn(*a, **k))
+    xyz = torch.rand(1, 1000, 3, generator=torch.Generator().manual_seed(1))
+    pointnet2.ball_query(0.1, 8, xyz, xyz[:, :19])  # 19 000 pairs: dense
+    pointnet2.three_nn(xyz[:, :100], xyz[:, :199])  # 19 900 pairs: dense
+    assert calls == []
+    pointnet2.ball_query(0.1, 8, xyz, xyz[:, :20])  # 20 000 pairs: KD-tree
+    pointnet2.three_nn(xyz[:, :100], xyz[:, :200])
+    assert calls.count("bq") == 1 and calls.count("tree") >= 2
+    calls.clear()
+    pointnet2.ball_query(0.1, 8, xyz.requires_grad_(), xyz[:, :20].detach())  # gradients: dense
+    assert calls == []
