@@ -17,13 +17,11 @@ from dvclive import Live
 
 from skt_lib.config import load_params
 from skt_lib.errors import DataError
-from skt_lib.io import read_npz
+from skt_lib.geometry.export import read_obj
+from skt_lib.io import read_npz, read_table
 from skt_lib.learning.data import load_supports
 from skt_lib.learning.predictor import SktPredictor
-from skt_lib.learning.sctdn import SctdnConfig
-from skt_lib.geometry.export import read_obj
-from skt_lib.io import read_table
-from skt_lib.learning.train import TrainSettings, predict_items, summarise, train_sctdn
+from skt_lib.learning.train import from_params, predict_items, summarise, train_sctdn
 from skt_lib.schemas import SUPPORTS
 from stages._common import parse_args
 from viz.figures import Panel, curves, mesh_gallery
@@ -46,10 +44,7 @@ def main(argv=None) -> int:
         raise DataError(f"{root / 'mesh_gen'}: {len(train)} training and {len(val)} validation "
                         "supports with labels; model selection needs both (set "
                         "mesh_gen.n_val_per_level ≥ 1) — it never selects on training supports")
-    cfg = SctdnConfig(k=k, T=T, n_points=supports[0].points.shape[1], feat_dim=p.feat_dim,
-                      lstm_hidden=p.lstm_hidden, centres=p.centres, nsample=p.nsample)
-    settings = TrainSettings(p.epochs, p.views_per_epoch, p.batch_size, p.lr, p.lr_final_ratio,
-                             p.weight_decay, tuple(p.val_views), p.contact_weight)
+    cfg, settings = from_params(p, k, T, supports[0].points.shape[1])
     history: list[dict] = []
     t0 = time.perf_counter()
     with Live(dir=str(rep / "live"), save_dvc_exp=False, dvcyaml=None, report=None) as live:

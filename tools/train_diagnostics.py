@@ -31,8 +31,8 @@ from skt_lib.config import load_params
 from skt_lib.io import read_npz
 from skt_lib.learning.data import load_supports
 from skt_lib.learning.predictor import SktPredictor
-from skt_lib.learning.sctdn import Sctdn, SctdnConfig, sctdn_loss
-from skt_lib.learning.train import TrainSettings, evaluate, make_batch, train_sctdn
+from skt_lib.learning.sctdn import Sctdn, sctdn_loss
+from skt_lib.learning.train import TrainSettings, evaluate, from_params, make_batch, train_sctdn
 
 
 def overfit_one_batch(cfg, templates, train, seed: int, steps: int) -> dict:
@@ -83,10 +83,8 @@ def main(argv=None) -> int:
     supports = load_supports(root, T)
     train = sorted((s for s in supports if s.split == "train"), key=lambda s: s.support_id)
     val = [s for s in supports if s.split == "val"]
-    cfg = SctdnConfig(k=k, T=T, n_points=supports[0].points.shape[1], feat_dim=p.feat_dim,
-                      lstm_hidden=p.lstm_hidden, centres=p.centres, nsample=p.nsample)
-    st = TrainSettings(args.epochs, p.views_per_epoch, p.batch_size, p.lr, p.lr_final_ratio,
-                       p.weight_decay, tuple(p.val_views), p.contact_weight)
+    cfg, st = from_params(p, k, T, supports[0].points.shape[1])
+    st = dataclasses.replace(st, epochs=args.epochs)
     out: dict = {"params": args.params, "short_run_epochs": args.epochs}
     print("overfit one batch …", flush=True)
     out["overfit_one_batch"] = overfit_one_batch(cfg, tz["templates"], train, seed, args.steps)

@@ -10,7 +10,7 @@ from skt_lib.perception.views import RENDER_SPEC
 from skt_lib.planning.trajectory import resample
 from skt_lib.schemas import CONTACTS, LABELS, SKTS
 
-AFF_SPEC = {"affordance": ("float32", 2)}
+AFF_SPEC = {"affordance": ("float32", 2), "contact_map": ("float32", 2), "contact_visible": ("bool", 1)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -22,6 +22,8 @@ class SupportData:
     affordance: np.ndarray  # (V, N) float32
     skts: np.ndarray  # (G, T, 3) float64 ground-truth SKTs resampled to T, ξ_0 first
     contact: np.ndarray  # (3,) support contact point
+    contact_map: np.ndarray  # (V, N) float32 M_cp of affordance_maps (Gaussian at the point nearest the contact)
+    contact_visible: np.ndarray  # (V,) bool: the contact is within affordance_maps.visible_tol_m of a point
     level: str = ""  # difficulty level (easy … very_hard), for per-level reports
 
 
@@ -39,7 +41,7 @@ def load_supports(root: Path, T: int) -> list[SupportData]:
         out.append(SupportData(row.support_id, row.split, int(row.category), cloud["points"],
                                aff["affordance"], gt,
                                np.asarray(contacts.loc[row.support_id, "contact_support"]),
-                               row.difficulty))
+                               aff["contact_map"], aff["contact_visible"], row.difficulty))
     return out
 
 

@@ -115,9 +115,10 @@ def sctdn_loss(out, gt, valid, aff_label, family, contact_target, w_aff: float =
     """L = L_T + 0.1·L_a + 0.1·L_c + 0.1·L_p; cross-entropy on logits (not on softmax outputs).
 
     L_p (not in the paper) is the cross-entropy between the softmax over the cloud's points of
-    the affordance logits and ``contact_target (B, N)``, a distribution peaked at the true
-    contact: the template is aligned at the affordance's argmax, and the per-point MSE of L_a
-    alone left that argmax more than 1 cm from the contact in most validation views."""
+    the affordance logits and ``contact_target (B, N)``, the view's contact map M_cp as a
+    distribution (peaked at the point nearest the true contact): the template is aligned at
+    the affordance's argmax, and the per-point MSE of L_a alone left that argmax more than
+    1 cm from the contact in most validation views."""
     l_t = traj_distance(out["trajectory"], gt, valid).mean()
     l_a = F.mse_loss(out["affordance"], aff_label)
     l_c = F.cross_entropy(out["logits"], family)

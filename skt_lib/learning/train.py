@@ -20,7 +20,15 @@ class TrainSettings:
     lr_final_ratio: float  # cosine decay over the epochs down to lr × this
     weight_decay: float
     val_views: tuple[int, ...]  # fixed views of each validation support
-    contact_weight: float = 0.1  # weight of the contact cross-entropy (sctdn_loss w_contact)
+    contact_weight: float  # weight of the contact cross-entropy (sctdn_loss w_contact)
+
+
+def from_params(p, k: int, T: int, n_points: int) -> tuple[SctdnConfig, TrainSettings]:
+    """The model config and loop settings of a ``train`` params section (TrainParams)."""
+    cfg = SctdnConfig(k=k, T=T, n_points=n_points, feat_dim=p.feat_dim, lstm_hidden=p.lstm_hidden,
+                      centres=p.centres, nsample=p.nsample)
+    return cfg, TrainSettings(p.epochs, p.views_per_epoch, p.batch_size, p.lr, p.lr_final_ratio,
+                              p.weight_decay, tuple(p.val_views), p.contact_weight)
 
 
 def make_batch(items: list[tuple[SupportData, int]], device="cpu"):
@@ -34,29 +42,18 @@ def make_batch(items: list[tuple[SupportData, int]], device="cpu"):
         gt[i, : len(s.skts)] = (s.skts - c[i]) / scale[i]
         valid[i, : len(s.skts)] = True
     contact = np.stack([(s.contact - c[i]) / scale[i] for i, (s, _) in enumerate(items)])
-    target = contact_target(pts, np.stack([s.contact for s, _ in items]))
+    cp = np.stack([s.contact_map[v] for s, v in items]).astype(np.float64)
     t = lambda a, dt=torch.float32: torch.as_tensor(a, dtype=dt, device=device)  # noqa: E731
     return {"xyz": t(xyz_n), "scale": t(scale), "centroid": t(c), "gt": t(gt),
             "valid": torch.as_tensor(valid, device=device),
             "aff": t(np.stack([s.affordance[v] for s, v in items])),
             "family": torch.as_tensor([s.family for s, _ in items], device=device),
-            "contact": t(contact), "contact_target": t(target)}
+            "contact": t(contact),
+            # the view's contact map M_cp as a distribution over its points: the contact
+            # cross-entropy's target, peaked at the point nearest the contact
+            "contact_target": t(cp / cp.sum(-1, keepdims=True))}
 
 
-def contact_target(points: np.ndarray, contact: np.ndarray) -> np.ndarray:
-    """Per cloud a distribution over its points ``(B, N)``, Gaussian (σ =
-    :data:`CONTACT_SIGMA_M`) in the distance to the true contact beyond the nearest point's,
-    so that it peaks at the point nearest the contact even where the contact is not seen."""
-    d = np.linalg.norm(points - contact[:, None], axis=-1)
-    w = np.exp(-0.5 * ((d - d.min(-1, keepdims=True)) / CONTACT_SIGMA_M) ** 2)
-    return w / w.sum(-1, keepdims=True)
-
-
-#: Width of the contact distribution the affordance logits are trained toward (as the
-#: affordance maps' contact term, affordance_maps.sigma_m in the embedded default).
-CONTACT_SIGMA_M = 0.005
-#: The true contact counts as visible in a view when a cloud point lies this close to it.
-CONTACT_VISIBLE_M = 0.005
 #: A predicted contact (argmax affordance) within this of the true one counts as right.
 CONTACT_OK_M = 0.01
 
@@ -66,7 +63,7 @@ def predict_items(model: Sctdn, items: list[tuple[SupportData, int]], batch_size
     """Per (support, view) figures, no teacher forcing: ``traj_mm`` and ``template_mm``
     (mean waypoint distance to the nearest ground-truth SKT), ``aff_mse``, ``cls_ok``,
     ``contact_err_m`` (argmax-affordance point to the true contact), ``contact_visible``
-    (a cloud point within :data:`CONTACT_VISIBLE_M` of the true contact): arrays
+    (as stored by affordance_maps): arrays
     ``(len(items),)``; ``trajectory_m``, ``aligned_m`` ``(len(items), T, 3)`` and ``contact_m``
     ``(len(items), 3)``: the prediction in metres, support frame."""
     model.eval()
@@ -90,8 +87,7 @@ def predict_items(model: Sctdn, items: list[tuple[SupportData, int]], batch_size
             picked = pts[int(out["affordance"][j].argmax())]
             cols["contact_m"].append(picked)
             cols["contact_err_m"].append(float(np.linalg.norm(picked - sup.contact)))
-            cols["contact_visible"].append(
-                bool(np.linalg.norm(pts - sup.contact, axis=1).min() <= CONTACT_VISIBLE_M))
+            cols["contact_visible"].append(bool(sup.contact_visible[v]))
     return {k: (torch.cat(v).double().numpy() if isinstance(v[0], torch.Tensor) else np.asarray(v))
             for k, v in cols.items()}
 

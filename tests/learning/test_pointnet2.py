@@ -203,7 +203,7 @@ def test_traj_distance_ignores_padding_and_matches_naive():
         pts = rng.normal(size=(1, 64, 3)).astype(np.float32) * 0.05
         skts = rng.normal(size=(n_skts, 6, 3)) * 0.05 + 0.2
         sup.append(SupportData(f"s{i}", "train", 0, pts, np.zeros((1, 64), np.float32), skts,
-                               np.zeros(3)))
+                               np.zeros(3), np.ones((1, 64), np.float32), np.ones(1, bool)))
     b = make_batch([(s, 0) for s in sup])
     assert b["gt"].shape == (3, 3, 6, 3)
     assert b["valid"].tolist() == [[True, False, False], [True, True, True], [True, True, False]]

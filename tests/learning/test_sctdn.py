@@ -16,7 +16,8 @@ def _supports(n=4, T=8):
         contact = pts[0, 0].astype(np.float64)
         skt = contact + np.outer(np.linspace(0, 1, T), [0.1, 0.02 * i, 0.05])
         aff = np.exp(-np.linalg.norm(pts - contact, axis=-1) ** 2 / 2e-4).astype(np.float32)
-        out.append(SupportData(f"s{i}", "train", i % 2, pts, aff, skt[None], contact))
+        out.append(SupportData(f"s{i}", "train", i % 2, pts, aff, skt[None], contact, aff,
+                               np.ones(2, bool)))
     return out
 
 
@@ -140,18 +141,24 @@ def test_predictor_matches_the_network_on_a_real_small_model():
     assert not np.allclose(skt.positions, pred.predict(pts, deform=False).positions)
 
 
-def test_contact_target_peaks_at_the_point_nearest_the_contact():
-    """A distribution per cloud, Gaussian in the distance beyond the nearest point's: its
-    argmax is the nearest point whether or not the contact itself was seen, and points σ
-    farther than that get e^{-1/2} of its weight."""
-    from skt_lib.learning.train import CONTACT_SIGMA_M, contact_target
+def test_contact_target_is_the_views_contact_map_as_a_distribution():
+    """make_batch turns the stored M_cp of each item's own view into a distribution over its
+    points (the contact cross-entropy's target): view 1 of support 0 is not view 0."""
+    sup = _supports()
+    cp = np.random.default_rng(1).random((2, 256)).astype(np.float32)
+    sup[0] = SupportData(**{**sup[0].__dict__, "contact_map": cp})
+    b = make_batch([(sup[0], 1), (sup[1], 0)])
+    t = b["contact_target"].double().numpy()
+    assert t[0] == pytest.approx(cp[1] / cp[1].sum(), rel=1e-5)
+    assert t[1] == pytest.approx(sup[1].contact_map[0] / sup[1].contact_map[0].sum(), rel=1e-5)
 
-    pts = np.zeros((2, 4, 3))
-    pts[:, :, 0] = [0.0, 0.01, 0.02, 0.03]
-    contact = np.array([[0.011, 0.0, 0.0], [0.5, 0.0, 0.0]])  # seen; far off (not seen)
-    t = contact_target(pts, contact)
-    assert t.shape == (2, 4) and np.allclose(t.sum(1), 1.0) and (t >= 0).all()
-    assert t.argmax(1).tolist() == [1, 3]
-    d = np.abs(pts[0, :, 0] - 0.011)
-    assert t[0] / t[0, 1] == pytest.approx(np.exp(-0.5 * ((d - d.min()) / CONTACT_SIGMA_M) ** 2))
-    assert t[1, 3] > 0.8  # the nearest point carries the weight when the contact is far
+
+def test_contact_rate_counts_only_views_where_the_contact_is_seen():
+    from skt_lib.learning.train import summarise
+
+    per = {"traj_mm": np.ones(4), "template_mm": np.ones(4), "aff_mse": np.zeros(4),
+           "cls_ok": np.ones(4), "contact_err_m": np.array([0.005, 0.02, 0.5, 0.01]),
+           "contact_visible": np.array([True, True, False, True])}
+    assert summarise(per)["val_contact_within_1cm_rate"] == pytest.approx(2 / 3)  # 1 cm counts
+    per["contact_visible"][:] = False
+    assert summarise(per)["val_contact_within_1cm_rate"] is None

@@ -37,7 +37,8 @@ def test_train_refuses_to_select_on_training_supports(monkeypatch, tmp_path):
     from stages import train as stage
 
     sup = [SupportData(f"s{i}", "train", 0, np.zeros((2, 16, 3), np.float32),
-                       np.zeros((2, 16), np.float32), np.zeros((1, 10, 3)), np.zeros(3))
+                       np.zeros((2, 16), np.float32), np.zeros((1, 10, 3)), np.zeros(3),
+                       np.ones((2, 16), np.float32), np.ones(2, bool))
            for i in range(3)]
     monkeypatch.setattr(stage, "load_params", lambda _: SimpleNamespace(
         train=SimpleNamespace(), common=SimpleNamespace(seed=0)))
