@@ -8,19 +8,28 @@
     plots/<metric>                     scalars
 
 Constant data is logged ``static=True``; each stage has its own timeline named after it.
-Recordings are written to a temporary file and renamed when complete.
+Recordings are written to a temporary file, made byte-reproducible (:mod:`viz.stable_rrd`)
+and renamed when complete.
 """
 
+import itertools
 import os
+import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
+from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from viz.stable_rrd import stabilise
+
 APP_ID = "skt_hang"
+# Chunks are cut by size only (no wall-clock flush tick), so their contents depend on what
+# was logged, not on timing; viz.stable_rrd then fixes ids and order (byte-stable files).
+_BATCHER = rr.ChunkBatcherConfig(flush_tick=timedelta(days=1), flush_num_bytes=8 << 20)
 
 
 def support_path(support_id: str) -> str:
@@ -38,23 +47,45 @@ def default_blueprint(title: str) -> rrb.Blueprint:
     )
 
 
+def fix_blueprint_ids(blueprint: rrb.Blueprint, name: str) -> rrb.Blueprint:
+    """Give the blueprint's containers and views ids derived from ``name`` and their place in
+    the tree instead of random ``uuid4``s (byte-reproducible recordings)."""
+    counter = itertools.count()
+
+    def visit(node) -> None:
+        node.id = uuid.uuid5(uuid.NAMESPACE_URL, f"skt_hang/{name}/{next(counter)}")
+        if isinstance(node, rrb.Container):
+            for child in node.contents:
+                visit(child)
+
+    if hasattr(blueprint, "root_container"):
+        visit(blueprint.root_container)
+    return blueprint
+
+
 @contextmanager
 def recording(stage: str, path: str | Path, title: str) -> Iterator[rr.RecordingStream]:
     """A recording saved to ``path`` (atomically, on success only) with the default blueprint."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
-    rec = rr.RecordingStream(APP_ID, recording_id=f"{APP_ID}-{stage}")
-    rec.save(str(tmp))
-    rec.send_blueprint(default_blueprint(title))
+    raw = path.with_name(f".{path.name}.raw")
+    recording_id = f"{APP_ID}-{stage}"
+    rec = rr.RecordingStream(APP_ID, recording_id=recording_id, send_properties=False,
+                             batcher_config=_BATCHER)
+    rec.set_log_time_enabled(False)
+    rec.save(str(raw))
+    rec.send_blueprint(fix_blueprint_ids(default_blueprint(title), stage))
     try:
         yield rec
         rec.flush()
         rec.disconnect()
+        stabilise(raw, tmp, APP_ID, recording_id)
         os.replace(tmp, path)
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        for leftover in (raw, tmp):
+            if leftover.exists():
+                leftover.unlink()
 
 
 def log_mesh(rec: rr.RecordingStream, entity: str, vertices: np.ndarray, faces: np.ndarray,
