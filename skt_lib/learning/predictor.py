@@ -8,6 +8,7 @@ Checkpoints are a ``state_dict`` (``sctdn.pt``, loaded with ``weights_only=True`
 JSON config (``sctdn.json``); no pickled objects.
 """
 
+import io
 import pickle
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,12 +50,15 @@ class SktPredictor:
         return cls(model)
 
     def save(self, directory: str | Path) -> None:
-        from skt_lib.io import atomic_path, write_text_atomic
+        from skt_lib.io import write_bytes_atomic, write_text_atomic
 
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
-        with atomic_path(d / "sctdn.pt") as tmp:
-            torch.save(self.model.state_dict(), tmp)
+        # Serialised in memory: written to a (randomly named) temp file, torch.save would name
+        # the zip's records after it and the bytes would change on every save.
+        buf = io.BytesIO()
+        torch.save(self.model.state_dict(), buf)
+        write_bytes_atomic(d / "sctdn.pt", buf.getvalue())
         write_text_atomic(d / "sctdn.json", self.cfg.to_json() + "\n")
 
     @torch.inference_mode()

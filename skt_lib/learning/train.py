@@ -2,6 +2,7 @@
 
 import copy
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,7 @@ class TrainSettings:
     weight_decay: float
     val_views: tuple[int, ...]  # fixed views of each validation support
     contact_weight: float  # weight of the contact cross-entropy (sctdn_loss w_contact)
+    threads: int = 2  # torch CPU threads: float sums depend on it (see reproducible())
 
 
 def from_params(p, k: int, T: int, n_points: int) -> tuple[SctdnConfig, TrainSettings]:
@@ -28,7 +30,7 @@ def from_params(p, k: int, T: int, n_points: int) -> tuple[SctdnConfig, TrainSet
     cfg = SctdnConfig(k=k, T=T, n_points=n_points, feat_dim=p.feat_dim, lstm_hidden=p.lstm_hidden,
                       centres=p.centres, nsample=p.nsample)
     return cfg, TrainSettings(p.epochs, p.views_per_epoch, p.batch_size, p.lr, p.lr_final_ratio,
-                              p.weight_decay, tuple(p.val_views), p.contact_weight)
+                              p.weight_decay, tuple(p.val_views), p.contact_weight, p.threads)
 
 
 def make_batch(items: list[tuple[SupportData, int]], device="cpu"):
@@ -109,13 +111,28 @@ def evaluate(model: Sctdn, supports: list[SupportData], views, batch_size: int =
     return summarise(predict_items(model, [(s, int(v)) for s in supports for v in views], batch_size))
 
 
+@contextmanager
+def reproducible(threads: int):
+    """Deterministic torch kernels and a fixed intra-op thread count for the block (both are
+    restored after): the same seed then gives the same weights, bit for bit, on any machine
+    with the same CPU instruction set, whatever its core count."""
+    old_threads, old_det = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
+    torch.set_num_threads(threads)
+    torch.use_deterministic_algorithms(True)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old_threads)
+        torch.use_deterministic_algorithms(old_det)
+
+
 def train_sctdn(cfg: SctdnConfig, templates: np.ndarray, train: list[SupportData],
                 val: list[SupportData], st: TrainSettings, seed: int,
                 on_epoch: Callable[[int, dict], None] | None = None) -> tuple[Sctdn, dict]:
     """Train; returns (model with the best validation weights, its validation metrics).
     Torch's global RNG is used only inside ``fork_rng`` (nothing leaks to the caller)."""
     rng = np.random.default_rng(seed)
-    with torch.random.fork_rng():
+    with torch.random.fork_rng(), reproducible(st.threads):
         torch.manual_seed(seed)
         model = Sctdn(cfg, torch.as_tensor(templates))
         opt = torch.optim.Adam(model.parameters(), lr=st.lr, weight_decay=st.weight_decay)

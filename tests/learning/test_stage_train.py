@@ -80,3 +80,21 @@ def test_train_diagnostics_tool_writes_its_tables(tiny_dataset, tmp_path):
         assert np.isfinite(r["val_traj_l2_mm"]) and r["epochs"] == 1
     assert set(d["committed_model"]) == {"train", "val"}
     assert "Learning curve" in (tmp_path / "diagnostics.md").read_text()
+
+
+def test_train_twice_gives_the_same_checkpoint_bytes(tiny_dataset, tmp_path):
+    """The stage run again on the same inputs writes the same sctdn.pt bytes and metrics
+    (no temp-file names inside the zip, fixed threads, deterministic kernels)."""
+    from stages import train as stage
+
+    params, data, reports = tiny_dataset
+    first = (data / "train" / "sctdn.pt").read_bytes()
+    assert stage.main(["--params", str(params), "--data-root", str(data),
+                       "--data-dir", str(tmp_path / "train"),
+                       "--reports-dir", str(tmp_path / "reports")]) == 0
+    assert (tmp_path / "train" / "sctdn.pt").read_bytes() == first
+    assert (tmp_path / "reports" / "metrics.json").read_text() == \
+        (reports / "train" / "metrics.json").read_text()
+    m = json.loads((tmp_path / "reports" / "metrics.json").read_text())
+    assert not [k for k in m if k.endswith(("_ms", "_ms_median", "_s", "_s_median"))], \
+        "wall-clock figures belong in the bench, not in metrics.json"
