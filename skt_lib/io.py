@@ -44,6 +44,16 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             tmp_path.unlink()
 
 
+def remove_partial_writes(directory: str | Path) -> int:
+    """Delete the temporary files of :func:`atomic_path` left under ``directory`` by a writer
+    that was killed (e.g. a Dask worker, whose task then ran again elsewhere); returns how
+    many. Call it once the items writing there have finished."""
+    stale = [p for p in Path(directory).rglob(".*.tmp") if p.is_file()]
+    for p in stale:
+        p.unlink()
+    return len(stale)
+
+
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)

@@ -22,9 +22,10 @@ def map_items(
     fn: Callable[[T], R],
     items: Sequence[T],
     compute: ComputeParams,
-    on_done: Callable[[int], None] | None = None,
+    on_done: Callable[[int, R], None] | None = None,
 ) -> list[R]:
-    """Apply ``fn`` to every item; ``on_done(i)`` is called as item ``i`` finishes.
+    """Apply ``fn`` to every item; ``on_done(i, result)`` is called in this process as item
+    ``i`` finishes (in completion order: e.g. to save it, see :mod:`skt_lib.resume`).
 
     An exception raised by ``fn`` propagates (tasks should turn expected per-item failures
     into return values themselves).
@@ -37,7 +38,7 @@ def map_items(
         for i, item in enumerate(items):
             out.append(fn(item))
             if on_done:
-                on_done(i)
+                on_done(i, out[-1])
         return out
     results: list = [None] * len(items)
     with ProcessPoolExecutor(max_workers=min(compute.n_workers, len(items))) as pool:
@@ -46,7 +47,7 @@ def map_items(
             i = futures[fut]
             results[i] = fut.result()
             if on_done:
-                on_done(i)
+                on_done(i, results[i])
     return results
 
 
@@ -70,7 +71,7 @@ def _map_dask(fn, items, compute: ComputeParams, on_done):
             i = index[fut.key]
             results[i] = fut.result()
             if on_done:
-                on_done(i)
+                on_done(i, results[i])
         return results
     finally:
         client.close()

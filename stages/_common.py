@@ -10,6 +10,9 @@ from tqdm import tqdm
 
 from skt_lib.config import ComputeParams
 from skt_lib.parallel import Failed, capture, map_items
+from skt_lib.resume import ItemStore
+
+log = logging.getLogger("resume")
 
 
 def parse_args(stage: str, argv: Sequence[str] | None) -> argparse.Namespace:
@@ -19,16 +22,43 @@ def parse_args(stage: str, argv: Sequence[str] | None) -> argparse.Namespace:
     ap.add_argument("--reports-dir", default=f"reports/{stage}", help="report directory")
     ap.add_argument("--data-root", default="data", help="where earlier stages' artifacts live")
     args = ap.parse_args(argv)
+    args.stage = stage
     logging.basicConfig(level=logging.INFO, format=f"[{stage}] %(levelname)s %(message)s")
     return args
 
 
-def run_items(fn: Callable, items: list, compute: ComputeParams, desc: str):
+def item_store(args: argparse.Namespace) -> ItemStore:
+    """Where this stage run keeps finished items (resumable stages, skt_lib.resume)."""
+    return ItemStore.for_stage(args.stage, args.params, args.data_root, args.data_dir)
+
+
+def run_items(fn: Callable, items: list, compute: ComputeParams, desc: str,
+              work: ItemStore | None = None):
     """Run ``fn`` over items with a progress bar; returns (ok values, Counter of failure
-    reasons, list of (item, Failed))."""
-    with tqdm(total=len(items), desc=desc, unit="item", dynamic_ncols=True) as bar:
-        results = map_items(functools.partial(capture, fn), items, compute,
-                            on_done=lambda _i: bar.update())
+    reasons, list of (item, Failed)).
+
+    With ``work``, items finished by an earlier, interrupted run of the same stage on the same
+    inputs are read back instead of recomputed, and each newly finished item is saved as it
+    completes. Crashes (bugs) are not saved."""
+    task = functools.partial(capture, fn)
+    results: list = [ItemStore.MISSING] * len(items)
+    keys = [ItemStore.key(fn, it) for it in items] if work else []
+    if work:
+        results = [work.load(k) for k in keys]
+    todo = [i for i, r in enumerate(results) if r is ItemStore.MISSING]
+    if work and len(todo) < len(items):
+        log.info("resuming: %d of %d items already done in %s", len(items) - len(todo),
+                 len(items), work.folder)
+
+    def done(j: int, result) -> None:
+        results[todo[j]] = result
+        if work:
+            work.save(keys[todo[j]], result)
+        bar.update()
+
+    with tqdm(total=len(items), initial=len(items) - len(todo), desc=desc, unit="item",
+              dynamic_ncols=True) as bar:
+        map_items(task, [items[i] for i in todo], compute, on_done=done)
     ok = [r for r in results if not isinstance(r, Failed)]
     failed = [(it, r) for it, r in zip(items, results) if isinstance(r, Failed)]
     return ok, Counter(f.reason for _, f in failed), failed

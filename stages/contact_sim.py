@@ -22,7 +22,7 @@ from skt_lib.geometry.se3 import pose_matrix, transform_points
 from skt_lib.io import read_table, write_table
 from skt_lib.schemas import CONTACTS, OBJECTS, SUPPORTS
 from skt_lib.sim.contact_sim import ROD_LENGTH_M, HangTask, simulate_hangs
-from stages._common import parse_args, run_items
+from stages._common import item_store, parse_args, run_items
 from viz.figures import Panel, mesh_gallery
 from viz.report import Report, write_metrics
 from viz.rerun_log import log_mesh, log_points, object_path, recording, support_path
@@ -48,12 +48,13 @@ def main(argv=None) -> int:
                           ref.aperture_clearance_m, s.support_id, str(src / s.urdf_path),
                           tuple(map(tuple, s.arm_centreline)), tuple(s.hang_point), s.radius_m, seed, p)
                  for s in supports.itertuples()]
+    work = item_store(args)
     t0 = time.perf_counter()
     obj_rows, obj_fail, obj_failed = run_items(simulate_hangs, obj_tasks, params.compute,
-                                               "objects on rod")
+                                               "objects on rod", work=work)
     t_obj = time.perf_counter() - t0
     sup_rows, sup_fail, sup_failed = run_items(simulate_hangs, sup_tasks, params.compute,
-                                               "reference on supports")
+                                               "reference on supports", work=work)
     t_sup = time.perf_counter() - t0 - t_obj
     raised = obj_failed + sup_failed  # items that raised an expected failure: no row
     for task, f in raised:
@@ -144,6 +145,7 @@ def main(argv=None) -> int:
     report.write()
     log.info("supports %d/%d ok, objects %d/%d ok", len(sup_ok), len(sup_tasks),
              sum(r["ok"] for r in obj_rows), len(obj_tasks))
+    work.finish()
     return 0
 
 

@@ -17,7 +17,7 @@ from skt_lib.config import LEVELS, OBJECT_CATEGORIES, load_params
 from skt_lib.geometry.build import OBJECT_RGBA, SUPPORT_RGBA, ObjectTask, SupportTask, build_object, build_support
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.splits import assign_splits
-from skt_lib.io import write_table
+from skt_lib.io import remove_partial_writes, write_table
 from skt_lib.schemas import OBJECTS, SUPPORTS
 from stages._common import parse_args, run_items
 from viz.figures import Panel, bar_chart, mesh_gallery
@@ -44,6 +44,7 @@ def main(argv=None) -> int:
     otasks += [ObjectTask(seed, c, k, p, str(out)) for c in OBJECT_CATEGORIES
                for k in range(p.n_objects_per_category)]
     objects, o_fail, o_failed = run_items(build_object, otasks, params.compute, "objects")
+    remove_partial_writes(out)  # left by a worker killed mid-write (its task reran)
     t_obj = time.perf_counter() - t0 - t_sup
     if not any(o["is_reference"] for o in objects):
         log.error("the reference object failed: %s", o_failed)

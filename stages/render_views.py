@@ -15,7 +15,7 @@ import numpy as np
 
 from skt_lib.config import LEVELS, load_params
 from skt_lib.errors import DataError
-from skt_lib.io import read_npz, read_table
+from skt_lib.io import read_npz, read_table, remove_partial_writes
 from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
 from skt_lib.schemas import SUPPORTS
 from stages._common import parse_args, run_items
@@ -36,6 +36,7 @@ def main(argv=None) -> int:
              for s in supports.itertuples()]
     t0 = time.perf_counter()
     results, failures, failed = run_items(render_support, tasks, params.compute, "supports")
+    remove_partial_writes(out)  # left by a worker killed mid-write (its task reran)
     wall = time.perf_counter() - t0
     for task, f in failed:
         log.error("%s: %s (%s)", task.support_id, f.reason, f.message)

@@ -23,7 +23,7 @@ from skt_lib.io import read_table, write_table
 from skt_lib.planning.skts import load_skt_tasks, plan_support_skts
 from skt_lib.planning.trajectory import arc_length, resample, skt_frames
 from skt_lib.schemas import OBJECTS, SKTS, SUPPORTS
-from stages._common import parse_args, run_items
+from stages._common import item_store, parse_args, run_items
 from viz.figures import Panel, histogram, mesh_gallery
 from viz.report import Report, write_metrics
 from viz.rerun_log import log_axes, log_mesh, log_strip, recording, support_path
@@ -50,7 +50,9 @@ def main(argv=None) -> int:
     tasks = load_skt_tasks(root, seed, p, params.clustering.T)
     mg = root / "mesh_gen"
     t0 = time.perf_counter()
-    results, crash_counts, crashed = run_items(plan_support_skts, tasks, params.compute, "supports")
+    work = item_store(args)
+    results, crash_counts, crashed = run_items(plan_support_skts, tasks, params.compute, "supports",
+                                               work=work)
     wall = time.perf_counter() - t0
     by_task = {r["support_id"]: r for r in results}  # never pair tasks with results by position
 
@@ -160,6 +162,7 @@ def main(argv=None) -> int:
     report.write()
     log.info("%d SKTs, success %.3f, recheck %.3f", len(rows), metrics["plan_success_rate"],
              metrics["recheck_collision_free_rate"])
+    work.finish()
     return 0
 
 

@@ -32,7 +32,7 @@ from skt_lib.io import write_table
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.schemas import TRIALS
 from skt_lib.sim.execute import REASONS, run_trial
-from stages._common import parse_args, run_items
+from stages._common import item_store, parse_args, run_items
 from viz.figures import bar_chart
 from viz.report import Report, write_metrics
 from viz.rollouts import log_rollouts
@@ -80,7 +80,8 @@ def main(argv=None) -> int:
     log.info("%d trials: %d methods × %d test supports × %d objects", len(tasks), len(p.methods),
              len(supports), len(objects))
     t0 = time.perf_counter()
-    results, _, crashes = run_items(run_trial, tasks, params.compute, "trials")
+    work = item_store(args)
+    results, _, crashes = run_items(run_trial, tasks, params.compute, "trials", work=work)
     wall = time.perf_counter() - t0
     if crashes:
         raise RuntimeError(f"{len(crashes)} trials crashed, first: {crashes[0][0].trial_id}: "
@@ -124,6 +125,7 @@ def main(argv=None) -> int:
     omeshes = {oid: read_obj(o_by_id[oid].mesh)[0] for oid in {t.object_id for t, _ in replay}}
     log_rollouts(out / "sim_eval.rrd", replay, meshes, omeshes, settings.robot_base)
     log.info("done: %s", {m: round(table[m]["all"], 3) for m in p.methods})
+    work.finish()
     return 0
 
 

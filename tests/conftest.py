@@ -80,3 +80,29 @@ def tiny_dataset(tmp_path_factory):
         assert stage.main(["--params", str(params), "--data-root", str(data),
                            "--data-dir", str(data / name), "--reports-dir", str(reports / name)]) == 0
     return params, data, reports
+
+
+@pytest.fixture(scope="session")
+def tiny_evaluated(tiny_dataset, tmp_path_factory):
+    """sim_eval on the tiny dataset, run once: (params, data root, sim_eval data, reports)."""
+    from stages import sim_eval
+
+    params, data, _ = tiny_dataset
+    root = tmp_path_factory.mktemp("sim_eval")
+    out, rep = root / "data" / "sim_eval", root / "reports"
+    assert sim_eval.main(["--params", str(params), "--data-root", str(data), "--data-dir", str(out),
+                          "--reports-dir", str(rep)]) == 0
+    return params, data, out, rep
+
+
+def assert_same_tree(a, b) -> None:
+    """Same relative file paths under ``a`` and ``b``, same bytes in each (names them all)."""
+    from pathlib import Path
+
+    def tree(root):
+        return {p.relative_to(root).as_posix() for p in Path(root).rglob("*") if p.is_file()}
+
+    fa, fb = tree(a), tree(b)
+    assert fa == fb, f"{a} vs {b}: only in first {sorted(fa - fb)}, only in second {sorted(fb - fa)}"
+    differ = [f for f in sorted(fa) if (Path(a) / f).read_bytes() != (Path(b) / f).read_bytes()]
+    assert not differ, f"{a} vs {b}: {len(differ)} of {len(fa)} files differ: {differ}"

@@ -70,3 +70,16 @@ def test_atomic_files_get_the_usual_mode(tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert stat.S_IMODE((tmp_path / "m.json").stat().st_mode) == 0o666 & ~umask
+
+
+def test_remove_partial_writes_only_touches_atomic_temp_files(tmp_path):
+    from skt_lib.io import remove_partial_writes
+
+    (tmp_path / "sub").mkdir()
+    keep = [tmp_path / "a.npz", tmp_path / "sub" / ".hidden", tmp_path / "sub" / "b.tmp"]
+    gone = [tmp_path / ".a.npz.x1y2.tmp", tmp_path / "sub" / ".m.obj.zz.tmp"]
+    for p in keep + gone:
+        p.write_bytes(b"x")
+    assert remove_partial_writes(tmp_path) == 2
+    assert all(p.exists() for p in keep) and not any(p.exists() for p in gone)
+    assert remove_partial_writes(tmp_path / "missing") == 0

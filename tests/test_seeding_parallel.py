@@ -38,9 +38,9 @@ def test_local_backend_same_result_for_any_worker_count():
 def test_dask_backend_matches_local():
     items = list(range(6))
     done = []
-    got = map_items(draw, items, ComputeParams(backend="dask", n_workers=2), on_done=done.append)
+    got = map_items(draw, items, ComputeParams(backend="dask", n_workers=2), on_done=lambda i, r: done.append((i, r)))
     assert got == [draw(i) for i in items]
-    assert sorted(done) == items
+    assert sorted(done) == [(i, draw(i)) for i in items]
 
 
 def test_capture_turns_expected_failures_into_values_only():

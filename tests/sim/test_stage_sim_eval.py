@@ -20,13 +20,8 @@ METHODS = ("oracle", "oracle_floating", "template_only", "sctdn", "kpam")
 
 
 @pytest.fixture(scope="module")
-def evaluated(tiny_dataset, tmp_path_factory):
-    params, data, _ = tiny_dataset
-    root = tmp_path_factory.mktemp("sim_eval")
-    out, rep = root / "data", root / "reports"
-    assert sim_eval.main(["--params", str(params), "--data-root", str(data), "--data-dir", str(out),
-                          "--reports-dir", str(rep)]) == 0
-    return params, data, out, rep
+def evaluated(tiny_evaluated):
+    return tiny_evaluated
 
 
 def test_metrics_contract_matches_the_trials_table(evaluated):
