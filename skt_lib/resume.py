@@ -30,6 +30,7 @@ import logging
 import pickle
 import shutil
 from pathlib import Path, PurePath
+from types import SimpleNamespace
 
 import numpy as np
 import yaml
@@ -116,6 +117,8 @@ def _canonical(obj):
     if dataclasses.is_dataclass(obj):
         return {type(obj).__qualname__: {f.name: _canonical(getattr(obj, f.name))
                                          for f in dataclasses.fields(obj)}}
+    if isinstance(obj, SimpleNamespace):
+        return {"SimpleNamespace": _canonical(vars(obj))}
     if hasattr(obj, "model_dump"):  # pydantic params sections
         return {type(obj).__qualname__: _canonical(obj.model_dump(mode="python"))}
     raise TypeError(f"cannot key a task containing {type(obj).__name__}; "

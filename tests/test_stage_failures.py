@@ -24,7 +24,9 @@ def _quiet(monkeypatch, module, *names):
 
 
 def _args(tmp_path):
-    return ["--params", "unused.yaml", "--data-root", str(tmp_path / "data"),
+    params = tmp_path / "params.yaml"  # read only to fingerprint resumable work (load_params is faked)
+    params.write_text("{}\n")
+    return ["--params", str(params), "--data-root", str(tmp_path / "data"),
             "--data-dir", str(tmp_path / "out"), "--reports-dir", str(tmp_path / "rep")]
 
 
