@@ -41,11 +41,10 @@ from skt_lib.io import write_bytes_atomic
 log = logging.getLogger(__name__)
 REPO = Path(__file__).resolve().parents[1]
 WORK_DIR = ".work"
-_MISSING = object()
-
-
 class ItemStore:
     """Finished per-item results of one stage run (see the module docstring)."""
+
+    MISSING = object()  # what :meth:`load` returns for an item not finished yet
 
     def __init__(self, folder: Path):
         self.folder = Path(folder)
@@ -72,15 +71,15 @@ class ItemStore:
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
     def load(self, key: str):
-        """The stored result for ``key``, or ``ItemStore.MISSING``."""
+        """The stored result for ``key``, or :attr:`MISSING`."""
         path = self.folder / f"{key}.pkl"
         try:
             return pickle.loads(path.read_bytes())
         except FileNotFoundError:
-            return _MISSING
+            return self.MISSING
         except Exception as err:  # a damaged file: recompute the item
             log.warning("ignoring unreadable work file %s: %s", path, err)
-            return _MISSING
+            return self.MISSING
 
     def save(self, key: str, result) -> None:
         write_bytes_atomic(self.folder / f"{key}.pkl", pickle.dumps(result, protocol=5))
@@ -92,9 +91,6 @@ class ItemStore:
             self.folder.parent.parent.rmdir()  # .work itself, when it is empty
         except OSError:
             pass
-
-
-ItemStore.MISSING = _MISSING
 
 
 def _canonical(obj):
