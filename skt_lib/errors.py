@@ -33,3 +33,7 @@ class GenerationFailed(ItemFailure):
     """A procedural shape could not be generated with the requested properties."""
 
     reason = "generation_failed"
+
+
+class InputError(SktError, ValueError):
+    """A file or argument given on the command line is missing, unreadable or wrong."""

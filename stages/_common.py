@@ -3,12 +3,15 @@
 import argparse
 import functools
 import logging
+import os
+import sys
 from collections import Counter
 from collections.abc import Callable, Sequence
 
 from tqdm import tqdm
 
 from skt_lib.config import ComputeParams
+from skt_lib.errors import SktError
 from skt_lib.parallel import Failed, capture, map_items
 from skt_lib.resume import ItemStore
 
@@ -24,7 +27,18 @@ def parse_args(stage: str, argv: Sequence[str] | None) -> argparse.Namespace:
     args = ap.parse_args(argv)
     args.stage = stage
     logging.basicConfig(level=logging.INFO, format=f"[{stage}] %(levelname)s %(message)s")
+    sys.excepthook = _report_skt_error
     return args
+
+
+def _report_skt_error(exc_type, exc, tb) -> None:
+    """Uncaught :class:`SktError` (bad params, a broken artifact…) in ``python -m stages.X``:
+    its message only, no traceback (``SKT_DEBUG=1`` shows it); anything else is a bug and
+    keeps its traceback. The exit code stays 1."""
+    if issubclass(exc_type, SktError) and not os.environ.get("SKT_DEBUG"):
+        sys.stderr.write(f"ERROR: {exc}\n")
+    else:
+        sys.__excepthook__(exc_type, exc, tb)
 
 
 def item_store(args: argparse.Namespace) -> ItemStore:

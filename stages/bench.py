@@ -11,6 +11,8 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
   ``render_total_ms_per_view_median``: the whole view (ray casting, FPS to N, shuffle,
   NPZ write share), over the same sample of supports, one process;
 - ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded;
+- ``cli_predict_ms_median``: ``skt predict``'s prediction of a 1000-point view (cleaning,
+  sampling, SCTDN), model loaded, process start excluded;
 - ``sim_trials_per_min``: sim_eval trials (Panda, oracle SKTs, every test object) per minute
   of wall time on ``compute.n_workers`` workers, over ``per_level`` test supports per level.
 Medians, because these machines are noisy.
@@ -26,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skt_lib.cli.predict import median_predict_ms
 from skt_lib.config import LEVELS, load_params
 from skt_lib.eval.methods import make_method
 from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
@@ -89,6 +92,11 @@ def sctdn_bench(root: Path, n: int = 100, warmup: int = 10) -> dict:
     return {"sctdn_inference_ms_median": 1000 * float(np.median(times))}
 
 
+def cli_bench(root: Path) -> dict:
+    cloud = read_npz(sorted((root / "render_views").glob("*.npz"))[0], RENDER_SPEC)["points"][0]
+    return {"cli_predict_ms_median": median_predict_ms(root / "train", cloud)}
+
+
 def sim_bench(params, root: Path, per_level: int) -> dict:
     p = params.sim_eval
     supports, objects, _ = load_test_set(root, params.clustering.T, params.common.seed,
@@ -116,6 +124,7 @@ def main(argv=None) -> int:
     bench: dict = {}  # fresh: a key this run does not measure must not survive from an old file
     bench.update(rrt_bench(params, Path(args.data_root), args.per_level))
     bench.update(sctdn_bench(Path(args.data_root)))
+    bench.update(cli_bench(Path(args.data_root)))
     bench.update(sim_bench(params, Path(args.data_root), args.per_level))
     with tempfile.TemporaryDirectory() as tmp:
         bench.update(render_bench(params, Path(args.data_root), args.per_level, Path(tmp)))

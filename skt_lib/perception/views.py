@@ -14,7 +14,7 @@ import numpy as np
 from skt_lib.config import RenderViewsParams
 from skt_lib.geometry.export import read_obj
 from skt_lib.io import write_npz_atomic
-from skt_lib.perception.pointcloud import add_depth_noise, farthest_point_sample
+from skt_lib.perception.pointcloud import add_depth_noise, sample_to
 from skt_lib.perception.render import DepthRenderer, viewpoints
 from skt_lib.seeding import item_rng
 
@@ -30,33 +30,42 @@ class RenderTask:
     params: RenderViewsParams
 
 
+def support_cameras(mesh, p: RenderViewsParams) -> list:
+    """The ``n_azimuth × n_elevation`` cameras of :func:`viewpoints` around ``mesh``'s box centre."""
+    target = (mesh.vertices.min(0) + mesh.vertices.max(0)) / 2
+    return viewpoints(target, p.distance_m, p.azimuth_deg, p.elevation_deg, p.n_azimuth, p.n_elevation)
+
+
+def render_view(renderer: DepthRenderer, cam, p: RenderViewsParams, rng: np.random.Generator,
+                name: str) -> tuple[np.ndarray, int, float, bool]:
+    """One view: (points (N, 3) float64, support frame; distinct points seen, ≤ N; ray-casting
+    seconds; whether it was rendered again at twice the resolution)."""
+    t0 = time.perf_counter()
+    pts, rays = renderer.points(cam, p.width, p.height)
+    seconds = time.perf_counter() - t0
+    rerendered = len(pts) < p.n_points
+    if rerendered:
+        pts, rays = renderer.points(cam, 2 * p.width, 2 * p.height)
+    pts = add_depth_noise(pts, rays, p.noise_std_m, rng)
+    if len(pts) == 0:
+        raise ValueError(f"{name}: the support is not visible")
+    return sample_to(pts, p.n_points, rng), min(len(pts), p.n_points), seconds, rerendered
+
+
 def render_support(task: RenderTask) -> dict:
     p = task.params
     (mesh,) = read_obj(task.mesh_path)
     renderer = DepthRenderer(mesh, p.fov_deg)
-    target = (mesh.vertices.min(0) + mesh.vertices.max(0)) / 2
-    cams = viewpoints(target, p.distance_m, p.azimuth_deg, p.elevation_deg, p.n_azimuth, p.n_elevation)
+    cams = support_cameras(mesh, p)
     points = np.zeros((len(cams), p.n_points, 3), np.float32)
     n_visible = np.zeros(len(cams), np.int32)
     render_s, n_rerendered = [], 0
     for v, cam in enumerate(cams):
         rng = item_rng(task.seed, "render_views", f"{task.support_id}/{v}")
-        t0 = time.perf_counter()
-        pts, rays = renderer.points(cam, p.width, p.height)
-        render_s.append(time.perf_counter() - t0)
-        if len(pts) < p.n_points:
-            n_rerendered += 1
-            pts, rays = renderer.points(cam, 2 * p.width, 2 * p.height)
-        pts = add_depth_noise(pts, rays, p.noise_std_m, rng)
-        n_visible[v] = min(len(pts), p.n_points)
-        if len(pts) == 0:
-            raise ValueError(f"{task.support_id} view {v}: the support is not visible")
-        if len(pts) >= p.n_points:
-            chosen = pts[farthest_point_sample(pts, p.n_points)]
-        else:
-            extra = rng.choice(len(pts), p.n_points - len(pts))
-            chosen = np.vstack([pts, pts[extra]])
-        points[v] = chosen[rng.permutation(p.n_points)]
+        points[v], n_visible[v], seconds, again = render_view(renderer, cam, p, rng,
+                                                              f"{task.support_id} view {v}")
+        render_s.append(seconds)
+        n_rerendered += again
     write_npz_atomic(task.out_path, {
         "points": points,
         "cameras": np.stack([c.pose() for c in cams]).astype(np.float32),

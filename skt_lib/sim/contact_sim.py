@@ -30,6 +30,9 @@ from skt_lib.sim.world import SUPPORT_POSE_WORLD, World
 ROD_LENGTH_M = 0.25
 ROD_CAP_RADIUS_M = 0.05
 ROD_CAP_THICKNESS_M = 0.004
+#: The test rod as a hanging arm (support frame, wall → tip) and the site objects are released at.
+ROD_ARM = ((0.0, 0.0, 0.0), (ROD_LENGTH_M, 0.0, 0.0))
+ROD_SITE = (0.13, 0.0, 0.0)
 _PARK = pose_matrix([0.5, 0.0, 2.0], [0, 0, 0, 1])  # out of the way while placing
 
 

@@ -1,0 +1,60 @@
+"""``skt``: the command line of skt-hang (``skt --help``).
+
+Expected errors (bad input files or arguments, a missing or corrupt model, a mesh that
+cannot be repaired…) print one line, ``ERROR: <file>: <what is wrong>``, and exit with
+code 2; ``--debug`` shows the traceback too. Nothing is left half-written: every output is
+written to a temporary file and renamed into place once complete.
+"""
+
+import argparse
+import sys
+import traceback
+from collections.abc import Sequence
+
+from skt_lib.cli import hang, import_mesh, predict
+from skt_lib.cli.common import EXIT_BAD_INPUT
+from skt_lib.errors import SktError
+
+EPILOG = """examples:
+  skt predict hook.ply -o skt.json --rrd skt.rrd
+  skt import-object my_mug.obj --name my_mug
+  skt hang --support support_00008 --object my_mug --method oracle --rrd hang.rrd"""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one ``ERROR:`` line and exit code 2."""
+
+    def error(self, message: str):
+        sys.stderr.write(f"ERROR: {self.prog}: {message} (see {self.prog} --help)\n")
+        sys.exit(EXIT_BAD_INPUT)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = _Parser(prog="skt", description="Semantic keypoint trajectories: predict, import, hang.",
+                 epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--debug", action="store_true", help="show tracebacks of expected errors")
+    sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
+    for module in (predict, import_mesh, hang):
+        module.add_parser(sub)
+    for p in sub.choices.values():
+        p.formatter_class = argparse.RawDescriptionHelpFormatter
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.run(args)
+    except SktError as err:
+        if args.debug:
+            traceback.print_exc()
+        message = " ".join(str(err).split())  # one line, whatever the library wrote
+        sys.stderr.write(f"ERROR: {message}\n")
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        sys.stderr.write("ERROR: interrupted\n")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,125 @@
+"""Meshes from outside (OBJ, STL, PLY, GLB…): read, check units, repair, decompose.
+
+A user's mesh is repaired where that is safe — duplicate vertices merged, degenerate faces
+dropped, winding made consistent and outward, small open boundary loops capped, overlapping
+bodies united — and refused with the reason otherwise. Collision geometry comes from CoACD
+(approximate convex decomposition), written in the same compound-of-hulls format as
+``mesh_gen`` (:mod:`skt_lib.geometry.export`).
+"""
+
+import logging
+
+import numpy as np
+import trimesh
+
+from skt_lib.errors import MeshError
+from skt_lib.geometry.checks import DIAGONAL_RANGE_M, check_solid
+from skt_lib.geometry.convex import Mesh, hull, union
+
+log = logging.getLogger(__name__)
+UNITS = {"m": 1.0, "mm": 0.001}
+#: Open boundary loops up to this many edges are capped; longer ones are real holes.
+MAX_CAP_EDGES = 64
+
+
+def read_mesh(path, units: str = "m") -> Mesh:
+    """The mesh in ``path`` (any format trimesh reads; scenes are merged), scaled to metres."""
+    try:
+        tm = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as err:  # trimesh raises many kinds for files it cannot parse
+        raise MeshError(f"{path}: not a mesh trimesh can read ({type(err).__name__}: "
+                        f"{str(err).splitlines()[0][:120] if str(err) else ''})") from None
+    if not isinstance(tm, trimesh.Trimesh) or len(tm.faces) == 0:
+        raise MeshError(f"{path}: no triangles in it (not a surface mesh)")
+    v = np.asarray(tm.vertices, dtype=np.float64) * UNITS[units]
+    if not np.isfinite(v).all():
+        raise MeshError(f"{path}: non-finite vertex coordinates")
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    lo, hi = DIAGONAL_RANGE_M
+    if diag > hi:
+        raise MeshError(f"{path}: {diag:.4g} m across — a mesh in millimetres? "
+                        "(pass --units mm to convert)")
+    if diag < lo:
+        raise MeshError(f"{path}: {diag:.4g} m across, below {lo} m"
+                        + (" (was it in metres already? drop --units mm)" if units == "mm" else ""))
+    return Mesh(v, np.asarray(tm.faces, dtype=np.int64))
+
+
+def _cap_loops(tm: trimesh.Trimesh, name: str) -> trimesh.Trimesh:
+    """Close each open boundary loop with a fan around its centroid."""
+    edges = tm.edges_sorted
+    uniq, count = np.unique(edges, axis=0, return_counts=True)
+    open_edges = uniq[count == 1]
+    if len(open_edges) == 0:
+        return tm
+    # directed boundary edges, as they run in their faces
+    directed = tm.edges[np.isin(tm.edges_sorted.view([("", edges.dtype)] * 2),
+                                open_edges.view([("", edges.dtype)] * 2)).ravel()]
+    nxt = {int(a): int(b) for a, b in directed}
+    if len(nxt) != len(directed):
+        raise MeshError(f"{name}: open boundary is not a set of simple loops (non-manifold)")
+    verts, faces = list(tm.vertices), list(tm.faces)
+    seen = set()
+    for start in list(nxt):
+        if start in seen:
+            continue
+        loop, v = [], start
+        while v not in seen:
+            seen.add(v)
+            loop.append(v)
+            if v not in nxt:
+                raise MeshError(f"{name}: open boundary does not close into loops")
+            v = nxt[v]
+        if len(loop) > MAX_CAP_EDGES:
+            raise MeshError(f"{name}: not watertight — a hole of {len(loop)} edges, too large "
+                            "to cap safely")
+        c = len(verts)
+        verts.append(np.mean(tm.vertices[loop], axis=0))
+        # the cap runs opposite to the boundary's direction in its faces
+        faces += [[c, loop[(i + 1) % len(loop)], loop[i]] for i in range(len(loop))]
+    return trimesh.Trimesh(np.array(verts), np.array(faces), process=False)
+
+
+def repair(mesh: Mesh, name: str) -> Mesh:
+    """A closed, consistently wound, outward solid from ``mesh``, or :class:`MeshError`
+    saying why not."""
+    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    tm.merge_vertices()
+    tm.update_faces(tm.nondegenerate_faces())
+    tm.update_faces(tm.unique_faces())
+    tm.remove_unreferenced_vertices()
+    if not tm.is_watertight:
+        tm = _cap_loops(tm, name)
+        tm.merge_vertices()
+    if not tm.is_watertight:
+        raise MeshError(f"{name}: not watertight and could not be repaired (non-manifold edges)")
+    bodies = tm.split(only_watertight=False)
+    solids = []
+    for b in bodies:
+        trimesh.repair.fix_winding(b)
+        trimesh.repair.fix_inversion(b)
+        if not b.is_winding_consistent:
+            raise MeshError(f"{name}: inconsistent face winding that could not be fixed")
+        solids.append(Mesh(np.asarray(b.vertices), np.asarray(b.faces, dtype=np.int64)))
+    out = union(solids) if len(solids) > 1 else solids[0]
+    check_solid(out, name)
+    return out
+
+
+def decompose(mesh: Mesh, threshold: float = 0.05, seed: int = 0) -> list[Mesh]:
+    """Convex parts covering ``mesh`` (CoACD, concavity ``threshold``, seeded), as hulls."""
+    import coacd
+
+    coacd.set_log_level("error")
+    parts = coacd.run_coacd(coacd.Mesh(mesh.vertices, mesh.faces), threshold=threshold,
+                            seed=seed, max_ch_vertex=64, mcts_iterations=60, mcts_nodes=10,
+                            mcts_max_depth=2)  # a third of the default search: ~5 s a mug
+    hulls = []
+    for v, _ in parts:
+        try:
+            hulls.append(hull(np.asarray(v, dtype=np.float64)))
+        except ValueError:
+            continue  # a flat sliver (fewer than 4 points): no volume to collide with
+    if not hulls:
+        raise MeshError("convex decomposition gave no parts")
+    return hulls

@@ -1,0 +1,171 @@
+"""The README's bad-input table, one row per test: each gives one ``ERROR:`` line naming the
+file or argument, exit code 2, no traceback, no output file, and leaves the data root as it was."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from tests.cli.conftest import EASY_SUPPORT, OBJECT, run_skt, save_ply, tree_state
+
+
+def _predict(cloud, d, *extra):
+    return ["predict", cloud, "--model", d / "train", "-o", "OUT/skt.json", *extra]
+
+
+def _hang(d, params, support=EASY_SUPPORT, obj=OBJECT, method="oracle", *extra):
+    return ["hang", "--support", support, "--object", obj, "--method", method,
+            "--params", params, "--data-root", d, *extra]
+
+
+def _write(path, data: bytes):
+    path.write_bytes(data)
+    return path
+
+
+def _corrupt_model(t, d):
+    m = t / "model"
+    m.mkdir()
+    shutil.copy(d / "train" / "sctdn.json", m / "sctdn.json")
+    _write(m / "sctdn.pt", b"PK\x03\x04 not a checkpoint")
+    return m
+
+
+# (row name, builder (tmp, data root, view, params) -> (args, what the message must name))
+ROWS = {
+    "missing file": lambda t, d, v, p: (_predict(t / "nope.ply", d), "nope.ply: no such"),
+    "empty file": lambda t, d, v, p: (_predict(_write(t / "e.ply", b""), d), "e.ply: empty file"),
+    "unknown cloud format": lambda t, d, v, p: (_predict(_write(t / "c.csv", b"1,2,3\n"), d),
+                                                "c.csv: unknown point-cloud format"),
+    "not a PLY": lambda t, d, v, p: (_predict(_write(t / "x.ply", b"hello\n"), d), "x.ply: no points"),
+    "corrupt npy": lambda t, d, v, p: (_predict(_write(t / "x.npy", b"\x93NUMPY garbage"), d),
+                                       "x.npy: not a readable"),
+    "npz without points": lambda t, d, v, p: (
+        _predict(_npz(t / "x.npz", a=v, b=v), d), "x.npz: 2 arrays and none named 'points'"),
+    "text that is not numbers": lambda t, d, v, p: (
+        _predict(_write(t / "x.xyz", b"x y z\nfoo bar baz\n"), d), "x.xyz: not a readable"),
+    "2-column array": lambda t, d, v, p: (_predict(_npy(t / "x.npy", v[:, :2]), d),
+                                          "x.npy: expected an (N, 3) array"),
+    "NaN rows (too few finite)": lambda t, d, v, p: (
+        _predict(_npy(t / "x.npy", np.where(np.arange(len(v))[:, None] < 950, np.nan, v)), d),
+        "50 finite points, need at least 100"),
+    "10 points": lambda t, d, v, p: (_predict(_npy(t / "x.npy", v[:10]), d),
+                                     "10 finite points, need at least 100"),
+    "millimetre cloud": lambda t, d, v, p: (_predict(_npy(t / "x.npy", 1000 * v), d),
+                                            "millimetres"),
+    "metres said to be mm": lambda t, d, v, p: (_predict(_npy(t / "x.npy", v), d, "--units", "mm"),
+                                                "was it in metres already"),
+    "all views of a render_views NPZ": lambda t, d, v, p: (
+        _predict(_npz(t / "x.npz", points=np.stack([v, v])), d),
+        "x.npz: expected an (N, 3) array of x, y, z, got shape (2, 1000, 3)"),
+    "frame not rigid": lambda t, d, v, p: (
+        _predict(_npy(t / "x.npy", v), d, "--frame", _json(t / "f.json", (2 * np.eye(4)).tolist())),
+        "f.json: not a rigid transform"),
+    "frame not JSON": lambda t, d, v, p: (
+        _predict(_npy(t / "x.npy", v), d, "--frame", _write(t / "f.json", b"{oops")),
+        "f.json: not valid JSON"),
+    "missing model folder": lambda t, d, v, p: (
+        ["predict", _npy(t / "x.npy", v), "--model", t / "no_model", "-o", "OUT/skt.json"],
+        "no_model: no such model folder"),
+    "corrupt checkpoint": lambda t, d, v, p: (
+        ["predict", _npy(t / "x.npy", v), "--model", _corrupt_model(t, d), "-o", "OUT/skt.json"],
+        "cannot load the SCTDN checkpoint"),
+    "unknown --method": lambda t, d, v, p: (_hang(d, p, method="magic"), "invalid choice: 'magic'"),
+    "unknown support": lambda t, d, v, p: (_hang(d, p, support="support_99999"),
+                                           "support_99999: no such support"),
+    "unknown object": lambda t, d, v, p: (_hang(d, p, obj="object_teapot_000"),
+                                          "object_teapot_000: no such object"),
+    "support without a ground-truth SKT": lambda t, d, v, p: (_hang(d, p, support="support_00002"),
+                                                              "support_00002: has no ground-truth"),
+    "params typo": lambda t, d, v, p: (
+        _hang(d, _write(t / "bad.yaml", p.read_text().replace("seed:", "sede:").encode())),
+        "bad.yaml: common.sede: unknown key"),
+    "params file missing": lambda t, d, v, p: (_hang(d, t / "none.yaml"), "none.yaml: params file not found"),
+    "import: not a mesh": lambda t, d, v, p: (_import(_write(t / "x.obj", b"hello\n"), d, p),
+                                              "x.obj: no triangles"),
+    "import: unknown mesh format": lambda t, d, v, p: (_import(_write(t / "x.doc", b"hi\n"), d, p),
+                                                       "x.doc: not a mesh trimesh can read"),
+    "import: mesh in millimetres": lambda t, d, v, p: (_import(_box(t / "b.stl", 100.0), d, p),
+                                                       "b.stl: 173.2 m across — a mesh in millimetres"),
+    "import: hole beyond repair": lambda t, d, v, p: (_import(_open_sphere(t / "s.stl"), d, p),
+                                                      "s.stl: not watertight — a hole of"),
+    "import: no aperture": lambda t, d, v, p: (_import(_box(t / "b.obj", 0.1), d, p),
+                                               "b.obj: no through-hole that a rod can pass"),
+    "import: bad --name": lambda t, d, v, p: (_import(_box(t / "b.obj", 0.1), d, p, "a/b"),
+                                              "--name: 'a/b' must be"),
+}
+
+
+def _import(mesh, d, params, name=None):
+    return ["import-object", mesh, "--params", params, "--data-root", d,
+            *(["--name", name] if name else [])]
+
+
+def _box(path, size):
+    import trimesh
+
+    trimesh.creation.box([size] * 3).export(path)
+    return path
+
+
+def _open_sphere(path):
+    import trimesh
+
+    s = trimesh.creation.icosphere(5, radius=0.05)
+    s.update_faces(s.triangles_center[:, 2] < 0.0)  # a hemisphere: a hole of ~130 edges
+    s.export(path)
+    return path
+
+
+def _npy(path, a):
+    np.save(path, a)
+    return path
+
+
+def _npz(path, **arrays):
+    np.savez(path, **arrays)
+    return path
+
+
+def _json(path, obj):
+    path.write_text(json.dumps(obj))
+    return path
+
+
+@pytest.mark.parametrize("row", list(ROWS))
+def test_bad_input(row, capsys, tmp_path, data_root, view, tiny_dataset):
+    params = tiny_dataset[0]
+    (tmp_path / "OUT").mkdir()
+    args, expected = ROWS[row](tmp_path, data_root, view, params)
+    args = [str(a).replace("OUT", str(tmp_path / "OUT")) for a in args]
+    before = tree_state(data_root)
+    rc, out, err = run_skt(capsys, *args) if row != "unknown --method" else _argparse(capsys, args)
+    assert rc == 2, (row, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ERROR:"), err
+    assert expected in lines[0], lines[0]
+    assert "Traceback" not in err + out
+    assert list((tmp_path / "OUT").iterdir()) == []
+    assert tree_state(data_root) == before
+
+
+def _argparse(capsys, args):
+    with pytest.raises(SystemExit) as e:
+        run_skt(capsys, *args)
+    _, err = capsys.readouterr()
+    return e.value.code, "", err
+
+
+def test_console_script_exits_2_without_traceback(tmp_path, data_root, view):
+    """The installed ``skt`` script itself (a separate process); ``--debug`` adds the traceback."""
+    np.save(tmp_path / "x.npy", view[:, :2])
+    skt = shutil.which("skt", path=str(__import__("pathlib").Path(sys.executable).parent))
+    args = [skt, "predict", str(tmp_path / "x.npy"), "--model", str(data_root / "train")]
+    r = subprocess.run(args, capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip().splitlines()[-1].startswith("ERROR: ") and "x.npy" in r.stderr
+    r = subprocess.run([skt, "--debug", *args[1:]], capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" in r.stderr

@@ -1,0 +1,106 @@
+"""``skt predict`` on real clouds saved from render_views: formats, units, outliers, JSON."""
+
+import json
+
+import numpy as np
+import pytest
+
+from skt_lib.cli.predict import prepare_cloud
+from skt_lib.geometry.se3 import quat_to_matrix
+from skt_lib.learning.predictor import SktPredictor
+from skt_lib.planning.trajectory import skt_frames
+from tests.cli.conftest import run_skt, save_ply
+
+
+def _predict(capsys, data_root, cloud, out, *extra):
+    rc, stdout, err = run_skt(capsys, "predict", cloud, "--model", data_root / "train", "-o", out,
+                              *extra)
+    assert rc == 0, err
+    return json.loads(out.read_text())
+
+
+def test_predict_ply_and_npy_give_the_models_skt(capsys, data_root, view, tmp_path):
+    ply = save_ply(tmp_path / "hook.ply", view)
+    np.save(tmp_path / "hook.npy", view)
+    a = _predict(capsys, data_root, ply, tmp_path / "a.json", "--rrd", tmp_path / "a.rrd")
+    b = _predict(capsys, data_root, tmp_path / "hook.npy", tmp_path / "b.json")
+    assert a["waypoints"] == b["waypoints"] and a["affordance"] == b["affordance"]
+    # exactly the predictor's answer on the cloud as the CLI prepares it
+    predictor = SktPredictor.load(data_root / "train")
+    cloud, counts = prepare_cloud(view, predictor.cfg.n_points)
+    skt = predictor.predict(cloud)
+    assert a["schema"] == "skt" and a["schema_version"] == 1 and a["T"] == predictor.cfg.T
+    pos = np.array([w["position"] for w in a["waypoints"]])
+    np.testing.assert_allclose(pos, skt.positions, atol=1e-12)
+    rot = np.stack([quat_to_matrix(w["quat"]) for w in a["waypoints"]])
+    np.testing.assert_allclose(rot, skt_frames(pos)[:, :3, :3], atol=1e-9)
+    assert a["family"] == skt.family
+    assert np.asarray(a["points"]).shape == (predictor.cfg.n_points, 3)
+    assert len(a["affordance"]) == predictor.cfg.n_points
+    assert a["contact_point"] in a["points"]  # the contact is a cloud point
+    assert a["cleaning"] == counts
+    assert (tmp_path / "a.rrd").stat().st_size > 0
+
+
+def test_millimetre_cloud_refused_then_converted(capsys, data_root, view, tmp_path):
+    np.save(tmp_path / "mm.npy", view * 1000.0)
+    rc, _, err = run_skt(capsys, "predict", tmp_path / "mm.npy", "--model", data_root / "train",
+                         "-o", tmp_path / "mm.json")
+    assert rc == 2 and "mm.npy" in err and "--units mm" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "mm.json").exists()
+    mm = _predict(capsys, data_root, tmp_path / "mm.npy", tmp_path / "mm.json", "--units", "mm")
+    np.save(tmp_path / "m.npy", view)
+    m = _predict(capsys, data_root, tmp_path / "m.npy", tmp_path / "m.json")
+    np.testing.assert_allclose([w["position"] for w in mm["waypoints"]],
+                               [w["position"] for w in m["waypoints"]], atol=1e-6)
+
+
+def test_frame_moves_a_camera_cloud_into_the_support_frame(capsys, data_root, view, tmp_path):
+    c, s = np.cos(0.7), np.sin(0.7)
+    t = np.array([[c, -s, 0, 0.1], [s, c, 0, -0.2], [0, 0, 1, 0.3], [0, 0, 0, 1.0]])
+    cam = (view - t[:3, 3]) @ t[:3, :3]  # the same points seen in the camera frame
+    np.savetxt(tmp_path / "cam.xyz", cam)
+    (tmp_path / "t.json").write_text(json.dumps({"matrix": t.tolist()}))
+    got = _predict(capsys, data_root, tmp_path / "cam.xyz", tmp_path / "c.json",
+                   "--frame", tmp_path / "t.json")
+    np.save(tmp_path / "m.npy", view)
+    ref = _predict(capsys, data_root, tmp_path / "m.npy", tmp_path / "m.json")
+    np.testing.assert_allclose([w["position"] for w in got["waypoints"]],
+                               [w["position"] for w in ref["waypoints"]], atol=1e-5)
+
+
+def test_outliers_far_from_the_hook_do_not_move_the_contact(capsys, data_root, view, tmp_path):
+    rng = np.random.default_rng(12)
+    n = len(view) // 4  # 20 % of the noisy cloud
+    far = rng.uniform([0.25, -0.6, -0.6], [0.9, 0.6, 0.6], size=(n, 3))
+    noisy = rng.permutation(np.vstack([view, far]))
+    np.save(tmp_path / "noisy.npy", noisy)
+    np.save(tmp_path / "clean.npy", view)
+    got = _predict(capsys, data_root, tmp_path / "noisy.npy", tmp_path / "n.json")
+    ref = _predict(capsys, data_root, tmp_path / "clean.npy", tmp_path / "c.json")
+    # no outlier reaches the model: every point it saw is a point of the hook's view
+    hook = {tuple(p) for p in view}
+    assert all(tuple(p) in hook for p in got["points"])
+    dist = np.linalg.norm(np.subtract(got["contact_point"], ref["contact_point"]))
+    print(f"outlier contact distance: {1000 * dist:.2f} mm")
+    assert dist <= 0.01
+    assert got["cleaning"]["n_in"] == len(noisy)
+
+
+def test_nan_rows_are_dropped(capsys, data_root, view, tmp_path):
+    cloud = view.copy()
+    cloud[::50] = np.nan
+    save_ply(tmp_path / "nan.ply", cloud)
+    got = _predict(capsys, data_root, tmp_path / "nan.ply", tmp_path / "n.json")
+    assert got["cleaning"]["non_finite"] == len(view[::50])
+    assert np.isfinite(got["points"]).all()
+
+
+@pytest.mark.parametrize("args", [["--help"], ["predict", "--help"], ["hang", "--help"]])
+def test_help_has_examples(capsys, args):
+    from skt_lib.cli.main import main
+
+    with pytest.raises(SystemExit) as e:
+        main(args)
+    assert e.value.code == 0
+    assert "example" in capsys.readouterr().out
