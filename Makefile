@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: env repro test bench mutation train-diagnostics clean-env
+.PHONY: env repro test bench review mutation train-diagnostics clean-env
 
 env: $(STAMP)
 
@@ -39,6 +39,20 @@ test: $(STAMP)
 bench: $(STAMP)
 	@# speed figures into reports/bench/bench.json; needs the artifacts of `make repro`
 	$(BIN)/python -m stages.bench
+
+review: $(STAMP)
+	@# data/review/review.rrd (representative items of every stage, one tab each) and
+	@# reports/<stage>/rerun.png (each recording in Rerun's web viewer, headless Chromium);
+	@# needs the artifacts of `make repro`. Installs Debian's chromium when missing (as root).
+	@if [ ! -x /usr/bin/chromium ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "installing Debian package chromium (for screenshots)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	  else \
+	    echo "make review needs /usr/bin/chromium: run 'sudo apt-get install chromium' and retry" >&2; exit 2; \
+	  fi; \
+	fi
+	$(BIN)/python tools/review.py
 
 mutation: $(STAMP)
 	@# mutmut on the modules the tests must guard, one at a time, each with its fast unit

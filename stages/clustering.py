@@ -68,10 +68,10 @@ def main(argv=None) -> int:
 
     with recording("clustering", out / "clustering.rrd", "clustering: templates") as rec:
         for j, t in enumerate(fam.templates):
-            log_strip(rec, f"world/templates/{j}", t + [0.0, 0.15 * j, 0.0])
-        log_scatter_2d(rec, "plots/pca/skts", fam.train_xy, fam.train_labels)
+            log_strip(rec, f"world/templates/{j}", t + [0.0, 0.15 * j, 0.0], static=True)
+        log_scatter_2d(rec, "plots/pca/skts", fam.train_xy, fam.train_labels, static=True)
         log_scatter_2d(rec, "plots/pca/centres", fam.centres, np.arange(p.k),
-                       labels=[f"family {j}" for j in range(p.k)])
+                       labels=[f"family {j}" for j in range(p.k)], static=True)
     report = Report("clustering", rep)
     report.text(f"{metrics['n_train_skts']} SKTs of {len(train)} training supports, T = {p.T}, "
                 f"k = {p.k}; cluster sizes {sizes}; silhouette {fam.silhouette:.3f}. Templates from "

@@ -21,15 +21,14 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix, transform_points
 from skt_lib.io import read_table, write_table
 from skt_lib.schemas import CONTACTS, OBJECTS, SUPPORTS
-from skt_lib.sim.contact_sim import ROD_LENGTH_M, HangTask, simulate_hangs
+from skt_lib.sim.contact_sim import ROD_ARM, ROD_SITE, HangTask, simulate_hangs
 from stages._common import item_store, parse_args, run_items
 from viz.figures import Panel, mesh_gallery
 from viz.report import Report, write_metrics
-from viz.rerun_log import log_mesh, log_points, object_path, recording, support_path
+from viz.rerun_log import (SUPPORT_EYE, SUPPORT_LOOK_AT, ItemTimeline, item_blueprint, log_mesh,
+                           log_points, object_path, recording, support_path)
 
 log = logging.getLogger("contact_sim")
-ROD_ARM = ((0.0, 0.0, 0.0), (ROD_LENGTH_M, 0.0, 0.0))
-ROD_SITE = (0.13, 0.0, 0.0)
 
 
 def main(argv=None) -> int:
@@ -86,24 +85,30 @@ def main(argv=None) -> int:
     meshes = {r.support_id: read_obj(src / r.mesh_path)[0] for r in supports.itertuples()}
     meshes |= {r.object_id: read_obj(src / r.mesh_path)[0] for r in objects.itertuples()}
     poses = {r["item_id"]: pose_matrix(r["hang_position"], r["hang_quat"]) for r in rows if r["ok"]}
-    with recording("contact_sim", out / "contact_sim.rrd", "contact_sim: hangs and contacts") as rec:
-        for k, r in enumerate(sup_rows):
+    bp = item_blueprint("contact_sim: the hang and its contact point", "support", SUPPORT_EYE,
+                        SUPPORT_LOOK_AT)
+    with recording("contact_sim", out / "contact_sim.rrd", "contact_sim", bp) as rec:
+        items = ItemTimeline(rec, "support")
+        for r in sup_rows:
             e, m = support_path(r["support_id"]), meshes[r["support_id"]]
-            log_mesh(rec, e, m.vertices, m.faces, SUPPORT_RGBA, (0.0, 0.25 * k, 0.0),
-                     difficulty=level[r["support_id"]], ok=str(r["ok"]), reason=r["failure_reason"])
+            items.next(e, r["support_id"], level=level[r["support_id"]],
+                       hung="yes" if r["ok"] else f"no ({r['failure_reason']})")
+            log_mesh(rec, e, m.vertices, m.faces, SUPPORT_RGBA)
             if r["ok"]:
                 log_points(rec, f"{e}/contact", r["contact_support"], labels=["contact"])
                 rm = meshes[ref.object_id]
                 log_mesh(rec, f"{e}/reference", rm.vertices, rm.faces, OBJECT_RGBA["reference"],
                          pose=poses[r["support_id"]])
-        for k, r in enumerate(obj_rows):
+        items = ItemTimeline(rec, "object")
+        category = objects.set_index("object_id")["category"]
+        for r in obj_rows:  # hung on the rod (rod frame)
+            e, m = object_path(r["object_id"]), meshes[r["object_id"]]
+            items.next(e, r["object_id"], category=category[r["object_id"]],
+                       hung="yes" if r["ok"] else f"no ({r['failure_reason']})")
             if r["ok"]:
-                m = meshes[r["object_id"]]
-                v = transform_points(poses[r["object_id"]], m.vertices)
-                category = objects.set_index("object_id").loc[r["object_id"], "category"]
-                log_mesh(rec, object_path(r["object_id"]), v, m.faces, OBJECT_RGBA[category],
-                         (-0.5, 0.25 * k, 0.0), category=category)
-                log_points(rec, f"{object_path(r['object_id'])}/contact", r["contact_support"])
+                log_mesh(rec, e, m.vertices, m.faces, OBJECT_RGBA[category[r["object_id"]]],
+                         pose=poses[r["object_id"]])
+                log_points(rec, f"{e}/contact", r["contact_support"], labels=["contact"])
 
     report = Report("contact_sim", rep)
     report.text(f"Seed {seed}. Each item: {p.n_drops} releases, {p.drop_steps} drop steps, "
@@ -142,6 +147,7 @@ def main(argv=None) -> int:
               for r in [q for q in obj_rows if q["ok"] and cat[q["object_id"]] == c][:1]]
     mesh_gallery(panels, report.figure("objects_on_rod.png", "One object per category hung on the "
                                        "rod (rod along x; red: contact point)"), ncols=3, azim=-30)
+    report.recording("support")
     report.write()
     log.info("supports %d/%d ok, objects %d/%d ok", len(sup_ok), len(sup_tasks),
              sum(r["ok"] for r in obj_rows), len(obj_tasks))

@@ -22,7 +22,8 @@ from skt_lib.schemas import OBJECTS, SUPPORTS
 from stages._common import parse_args, run_items
 from viz.figures import Panel, bar_chart, mesh_gallery
 from viz.report import Report, write_metrics
-from viz.rerun_log import log_mesh, object_path, recording, support_path
+from viz.rerun_log import (SUPPORT_EYE, SUPPORT_LOOK_AT, ItemTimeline, item_blueprint, log_mesh,
+                           object_path, recording, support_path)
 
 log = logging.getLogger("mesh_gen")
 GALLERY_PER_GROUP = 8
@@ -86,20 +87,22 @@ def main(argv=None) -> int:
 
     meshes = {r.get("support_id", r.get("object_id")): read_obj(out / r["mesh_path"])[0]
               for r in supports + objects}
-    with recording("mesh_gen", out / "mesh_gen.rrd", "mesh_gen: supports and objects") as rec:
-        column: Counter = Counter()
+    bp = item_blueprint("mesh_gen: one item at a time", "support", SUPPORT_EYE, SUPPORT_LOOK_AT)
+    with recording("mesh_gen", out / "mesh_gen.rrd", "mesh_gen", bp) as rec:
+        items = ItemTimeline(rec, "support")
         for s in supports:
-            m, row = meshes[s["support_id"]], LEVELS.index(s["difficulty"])
-            col = column[s["difficulty"]]
-            column[s["difficulty"]] += 1
-            log_mesh(rec, support_path(s["support_id"]), m.vertices, m.faces, SUPPORT_RGBA,
-                     (0.25 * row, 0.25 * col, 0.0), family=s["family"],
-                     difficulty=s["difficulty"], split=s["split"])
-        for k, o in enumerate(objects):
-            m = meshes[o["object_id"]]
-            log_mesh(rec, object_path(o["object_id"]), m.vertices, m.faces,
-                     OBJECT_RGBA[o["category"]], (-0.4, 0.2 * k, 0.0), category=o["category"],
-                     aperture=o["aperture"])
+            m, e = meshes[s["support_id"]], support_path(s["support_id"])
+            items.next(e, s["support_id"], level=s["difficulty"], family=s["family"],
+                       split=s["split"], blocking_height_cm=100 * s["blocking_height_m"],
+                       convex_parts=s["n_parts"], part_iou=s["part_iou"])
+            log_mesh(rec, e, m.vertices, m.faces, SUPPORT_RGBA)
+        items = ItemTimeline(rec, "object")
+        for o in objects:
+            m, e = meshes[o["object_id"]], object_path(o["object_id"])
+            items.next(e, o["object_id"], category=o["category"], aperture=o["aperture"],
+                       split=o["split"], aperture_clearance_mm=1000 * o["aperture_clearance_m"],
+                       mass_kg=o["mass_kg"], convex_parts=o["n_parts"])
+            log_mesh(rec, e, m.vertices, m.faces, OBJECT_RGBA[o["category"]])
 
     report = Report("mesh_gen", rep)
     report.text(f"Seed {seed}; {len(supports)} supports and {len(real)} objects (+ the reference "
@@ -129,6 +132,7 @@ def main(argv=None) -> int:
                                          OBJECT_RGBA[c])])
                  for o in objects if o["category"] == c][:GALLERY_PER_GROUP]
         mesh_gallery(items, report.figure(f"objects_{c}.png", f"{c} objects"), elev=10, azim=-20)
+    report.recording("support")
     report.write()
     log.info("wrote %d supports, %d objects, %d invalid", len(supports), len(objects),
              metrics["n_invalid"])

@@ -15,15 +15,21 @@ import numpy as np
 
 from skt_lib.config import LEVELS, load_params
 from skt_lib.errors import DataError
+from skt_lib.geometry.build import SUPPORT_RGBA
+from skt_lib.geometry.export import read_obj
 from skt_lib.io import read_npz, read_table, remove_partial_writes
 from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
 from skt_lib.schemas import SUPPORTS
 from stages._common import parse_args, run_items
 from viz.figures import cloud_grid
 from viz.report import Report, write_metrics
-from viz.rerun_log import log_camera, log_points, recording, support_path
+from viz.rerun_log import (SUPPORT_EYE, SUPPORT_LOOK_AT, ItemTimeline, item_blueprint, log_camera,
+                           log_mesh, log_points, recording, support_path)
 
 log = logging.getLogger("render_views")
+REVIEW_PER_LEVEL = 2  # supports per difficulty level in the recording
+VIEW_RGB = [(60, 120, 220), (220, 90, 40), (40, 170, 90), (200, 60, 170), (200, 180, 40),
+            (60, 190, 200)]
 
 
 def main(argv=None) -> int:
@@ -59,17 +65,27 @@ def main(argv=None) -> int:
     }
     write_metrics(rep, metrics)
 
-    done = {r["support_id"] for r in results}
+    done = {r["support_id"]: r for r in results}
+    level = supports.set_index("support_id")
     sample = [s for lv in LEVELS
-              for s in [s for s in supports[supports["difficulty"] == lv]["support_id"] if s in done][:1]]
+              for s in [s for s in level.index[level["difficulty"] == lv] if s in done][:REVIEW_PER_LEVEL]]
     clouds = {sid: read_npz(out / f"{sid}.npz", RENDER_SPEC) for sid in sample}
-    with recording("render_views", out / "render_views.rrd", "render_views: partial clouds") as rec:
-        for k, sid in enumerate(sample):
-            c = clouds[sid]
-            for v in range(0, n_views, 7):
-                e = f"{support_path(sid)}/views/{v}"
-                log_points(rec, f"{e}/cloud", c["points"][v], rgb=(60, 120, 220), radius=0.0008)
-                log_camera(rec, f"{e}/camera", c["cameras"][v], p.width, p.height, p.fov_deg)
+    bp = item_blueprint("render_views: partial clouds (every 7th view)", "support", SUPPORT_EYE,
+                        SUPPORT_LOOK_AT)
+    with recording("render_views", out / "render_views.rrd", "render_views", bp) as rec:
+        items = ItemTimeline(rec, "support")
+        for sid in sample:
+            c, e, row = clouds[sid], support_path(sid), level.loc[sid]
+            shown = list(range(0, n_views, 7))
+            items.next(e, sid, level=row["difficulty"], family=row["family"], views=n_views,
+                       shown=f"{len(shown)} (colour per view)", points_per_view=p.n_points,
+                       on_surface_rate=done[sid]["on_surface_rate"])
+            m = read_obj(src / row["mesh_path"])[0]
+            log_mesh(rec, e, m.vertices, m.faces, (*SUPPORT_RGBA[:3], 0.35))
+            for j, v in enumerate(shown):
+                rgb = VIEW_RGB[j % len(VIEW_RGB)]
+                log_points(rec, f"{e}/views/{v}/cloud", c["points"][v], rgb=rgb, radius=0.0008)
+                log_camera(rec, f"{e}/views/{v}/camera", c["cameras"][v], p.width, p.height, p.fov_deg)
 
     report = Report("render_views", rep)
     report.text(f"{len(results)} of {len(tasks)} supports rendered (failed: "
@@ -81,9 +97,11 @@ def main(argv=None) -> int:
                 f"On-surface rate (≤ 1 mm from the mesh): {metrics['on_surface_rate']:.4f}.")
     report.text("Camera layout: azimuth " + f"{p.azimuth_deg} × elevation {p.elevation_deg} degrees, "
                 f"{p.distance_m} m from the support's bounding-box centre, looking at it, +z up.")
-    cloud_grid([(f"{sid} view {v}", clouds[sid]["points"][v], None) for sid in sample for v in (0, 17, 41)
+    first = list({level.loc[sid, "difficulty"]: sid for sid in reversed(sample)}.values())[::-1]
+    cloud_grid([(f"{sid} view {v}", clouds[sid]["points"][v], None) for sid in first for v in (0, 17, 41)
                 if v < n_views], report.figure("views.png", "Sample partial clouds (one support per "
                                                 "level; views 0, 17, 41)"), ncols=3)
+    report.recording("support")
     report.write()
     log.info("%d of %d supports rendered", len(results), len(tasks))
     return 0

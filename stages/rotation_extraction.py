@@ -23,7 +23,8 @@ from skt_lib.sim.keypoints import keypoint_from_hang, orthonormality_error
 from stages._common import parse_args
 from viz.figures import Panel, mesh_gallery
 from viz.report import Report, write_metrics
-from viz.rerun_log import log_axes, log_mesh, object_path, recording
+from viz.rerun_log import (OBJECT_EYE, OBJECT_LOOK_AT, ItemTimeline, item_blueprint, log_axes, log_mesh,
+                           object_path, recording)
 
 log = logging.getLogger("rotation_extraction")
 
@@ -59,11 +60,15 @@ def main(argv=None) -> int:
                         "max_orthonormality_error": max(errors)})
 
     meshes = {o: read_obj(root / "mesh_gen" / objects.loc[o, "mesh_path"])[0] for o in objects.index}
-    with recording("rotation_extraction", out / "rotation_extraction.rrd", "keypoint frames") as rec:
-        for k, r in enumerate(rows):
+    bp = item_blueprint("keypoint frame (x red: motion into the hang)", "object", OBJECT_EYE,
+                        OBJECT_LOOK_AT)
+    with recording("rotation_extraction", out / "rotation_extraction.rrd", "rotation_extraction",
+                   bp) as rec:
+        items = ItemTimeline(rec, "object")
+        for r in rows:
             e, m = object_path(r["object_id"]), meshes[r["object_id"]]
-            log_mesh(rec, e, m.vertices, m.faces, OBJECT_RGBA[r["category"]], (0.0, 0.25 * k, 0.0),
-                     category=r["category"])
+            items.next(e, r["object_id"], category=r["category"])
+            log_mesh(rec, e, m.vertices, m.faces, OBJECT_RGBA[r["category"]])
             log_axes(rec, f"{e}/keypoint", r["position"], np.reshape(r["rotation"], (3, 3)))
 
     report = Report("rotation_extraction", rep)
@@ -82,6 +87,7 @@ def main(argv=None) -> int:
     report.table(["object", "category", "position (m, object frame)", "x axis"],
                  [[r["object_id"], r["category"], np.round(r["position"], 4).tolist(),
                    np.round(np.reshape(r["rotation"], (3, 3))[:, 0], 3).tolist()] for r in rows])
+    report.recording("object")
     report.write()
     log.info("%d keypoints, %d missing", len(rows), len(missing))
     return 0

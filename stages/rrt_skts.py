@@ -14,6 +14,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+import rerun.blueprint as rrb
 
 from skt_lib.config import LEVELS, load_params
 from skt_lib.geometry.build import OBJECT_RGBA, SUPPORT_RGBA
@@ -26,7 +27,8 @@ from skt_lib.schemas import OBJECTS, SKTS, SUPPORTS
 from stages._common import item_store, parse_args, run_items
 from viz.figures import Panel, histogram, mesh_gallery
 from viz.report import Report, write_metrics
-from viz.rerun_log import log_axes, log_mesh, log_strip, recording, support_path
+from viz.rerun_log import (SKT_EYE, SKT_LOOK_AT, ItemTimeline, item_blueprint, log_frames, log_mesh, log_strip,
+                           recording, support_path)
 
 log = logging.getLogger("rrt_skts")
 #: A test object's sweep along the oracle SKT is "clear" when it penetrates at most this much
@@ -100,21 +102,31 @@ def main(argv=None) -> int:
 
     meshes = {sid: read_obj(mg / supports.loc[sid, "mesh_path"])[0] for sid in {t.support_id for t in tasks}}
     ref_mesh = read_obj(mg / ref.mesh_path)[0]
-    with recording("rrt_skts", out / "rrt_skts.rrd", "rrt_skts: SKTs per support") as rec:
-        for k, r in enumerate(results):
-            e, m = support_path(r["support_id"]), meshes[r["support_id"]]
-            log_mesh(rec, e, m.vertices, m.faces, SUPPORT_RGBA, (0.0, 0.3 * k, 0.0),
-                     difficulty=level[r["support_id"]], n_skts=str(len(r["skts"])))
+    bp = item_blueprint("rrt_skts: ground-truth SKTs (reference object at ξ_0 and at the start)",
+                        "support", SKT_EYE, SKT_LOOK_AT,
+                        side=(rrb.TimeSeriesView(origin="plots", name="per support"),))
+    with recording("rrt_skts", out / "rrt_skts.rrd", "rrt_skts", bp) as rec:
+        items = ItemTimeline(rec, "support")
+        for r in results:
+            sid = r["support_id"]
+            e, m = support_path(sid), meshes[sid]
+            items.next(e, sid, level=level[sid], family=supports.loc[sid, "family"],
+                       skts=f"{len(r['skts'])} of {r['n_attempted']} attempted",
+                       min_clearance_mm=(1000 * min(k["min_clearance_m"] for k in r["skts"])
+                                         if r["skts"] else "-"),
+                       failures=", ".join(f"{k} {v}" for k, v in sorted(r["failures"].items())) or "none")
+            items.scalar("skts_planned", len(r["skts"]))
+            log_mesh(rec, e, m.vertices, m.faces, SUPPORT_RGBA)
             for s in r["skts"]:
-                log_strip(rec, f"{e}/skt/{s['index']}", s["keypoints"])
-                for i, f in enumerate(skt_frames(resample(s["keypoints"], 10))):
-                    log_axes(rec, f"{e}/skt/{s['index']}/waypoints/{i}", f[:3, 3], f[:3, :3], 0.01)
-            if r["skts"] and k < 8:  # the reference object animated along its first SKT
-                poses = r["skts"][0]["poses"][::-1]
-                for i in range(0, len(poses), 5):
-                    rec.set_time("rrt_skts", sequence=i)
-                    log_mesh(rec, f"{e}/reference", ref_mesh.vertices, ref_mesh.faces,
-                             OBJECT_RGBA["reference"], pose=poses[i])
+                log_strip(rec, f"{e}/skt/{s['index']}", s["keypoints"], radius=0.001)
+                log_frames(rec, f"{e}/skt/{s['index']}/waypoints",
+                           skt_frames(resample(s["keypoints"], 10)), 0.01)
+            if r["skts"]:  # poses ξ_0 first: the hanging pose, then out to the start
+                poses = r["skts"][0]["poses"]
+                log_mesh(rec, f"{e}/reference/hung", ref_mesh.vertices, ref_mesh.faces,
+                         OBJECT_RGBA["reference"], pose=poses[0])
+                log_mesh(rec, f"{e}/reference/start", ref_mesh.vertices, ref_mesh.faces,
+                         (*OBJECT_RGBA["reference"][:3], 0.3), pose=poses[-1])
 
     report = Report("rrt_skts", rep)
     report.text(f"{len(rows)} SKTs on {metrics['n_supports_with_skts']}/{len(tasks)} supports "
@@ -159,6 +171,7 @@ def main(argv=None) -> int:
                                 lines=[s["keypoints"] for s in r["skts"]]))
     mesh_gallery(panels, report.figure("skts_by_level.png", "Sample SKTs (keypoint paths), one row "
                                        "per level"), ncols=3)
+    report.recording("support")
     report.write()
     log.info("%d SKTs, success %.3f, recheck %.3f", len(rows), metrics["plan_success_rate"],
              metrics["recheck_collision_free_rate"])

@@ -218,9 +218,11 @@ def _write_report(rep: Path, trials: pd.DataFrame, metrics: dict, methods, suppo
     report.table(["support", "level", *methods],
                  [[r["support_id"], r["difficulty"], *(_pct(r[m]) for m in methods)]
                   for _, r in per.iterrows()])
-    report.text(f"Rerun: `rerun data/sim_eval/sim_eval.rrd` — {len(chosen)} rollouts (robot, "
-                "object, SKT) on the `step` timeline: per method a few successes and the first "
-                "trial of each failure reason.")
+    report.recording("trial")
+    report.text(f"{len(chosen)} rollouts (robot, object, SKT with its waypoint frames, the "
+                "keypoint's executed path, its distance from the SKT): per method a few successes "
+                "and the first trial of each failure reason. The `trial` timeline shows each "
+                "trial's end state; scrub `step` to replay a rollout.")
     report.write()
 
 

@@ -16,9 +16,18 @@ from stages import contact_sim, render_views
 COMPUTE = ComputeParams(backend="local", n_workers=1)
 
 
+class _NoItems:
+    def __init__(self, *a, **k):
+        pass
+
+    def next(self, *a, **k):
+        pass
+
+
 def _quiet(monkeypatch, module, *names):
     """Replace viz/Rerun helpers with no-ops: these tests are about the counts."""
     monkeypatch.setattr(module, "recording", lambda *a, **k: contextlib.nullcontext(None))
+    monkeypatch.setattr(module, "ItemTimeline", _NoItems)
     for name in names:
         monkeypatch.setattr(module, name, lambda *a, **k: None)
 
@@ -32,7 +41,7 @@ def _args(tmp_path):
 
 def test_render_views_counts_failed_supports(monkeypatch, tmp_path):
     supports = pd.DataFrame({"support_id": ["s0", "s1", "s2", "s3"], "mesh_path": ["m"] * 4,
-                             "difficulty": ["easy", "normal", "hard", "very_hard"]})
+                             "difficulty": ["easy", "normal", "hard", "very_hard"], "family": ["peg"] * 4})
     p = SimpleNamespace(n_azimuth=1, n_elevation=1, n_points=8, noise_std_m=0.0, width=4,
                         height=3, fov_deg=40.0, azimuth_deg=[0, 0], elevation_deg=[0, 0],
                         distance_m=0.3)
@@ -50,7 +59,9 @@ def test_render_views_counts_failed_supports(monkeypatch, tmp_path):
     monkeypatch.setattr(render_views, "render_support", fake_render)
     monkeypatch.setattr(render_views, "read_npz", lambda *a: {
         "points": np.zeros((1, 8, 3), np.float32), "cameras": np.tile(np.eye(4), (1, 1, 1))})
-    _quiet(monkeypatch, render_views, "log_points", "log_camera", "cloud_grid")
+    _quiet(monkeypatch, render_views, "log_points", "log_camera", "log_mesh", "cloud_grid")
+    monkeypatch.setattr(render_views, "read_obj",
+                        lambda path: [SimpleNamespace(vertices=None, faces=None)])
     assert render_views.main(_args(tmp_path)) == 0
     m = json.loads((tmp_path / "rep" / "metrics.json").read_text())
     assert (m["n_supports"], m["n_rendered"], m["n_failed"]) == (4, 3, 1)

@@ -11,6 +11,7 @@ import numpy as np  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
 
 from skt_lib.io import atomic_path  # noqa: E402
+from viz.rerun_log import AFFORDANCE_CMAP  # noqa: E402
 
 _LIGHT = np.array([0.4, -0.6, 0.7]) / np.linalg.norm([0.4, -0.6, 0.7])
 
@@ -109,7 +110,8 @@ def cloud_grid(items: list[tuple[str, np.ndarray, np.ndarray | None]], path: str
         if values is None:
             ax.scatter(*pts.T, s=1.5, color="tab:blue", depthshade=False)
         else:
-            ax.scatter(*pts.T, s=2.0, c=values, cmap="inferno", vmin=0, vmax=1, depthshade=False)
+            ax.scatter(*pts.T, s=2.0, c=values, cmap=AFFORDANCE_CMAP, vmin=0, vmax=1,
+                       depthshade=False)
         _frame_3d(ax, pts, elev, azim, title)
     fig.tight_layout()
     save(fig, path)

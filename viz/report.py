@@ -33,6 +33,16 @@ class Report:
         self._parts.append(f"![{caption}]({filename})\n\n*{caption}*\n")
         return self.dir / filename
 
+    def recording(self, timeline: str) -> None:
+        """The section showing the stage's Rerun recording: ``rerun.png``, a screenshot of
+        ``data/<stage>/<stage>.rrd`` in Rerun's web viewer, written by ``make review``."""
+        self.heading("Rerun recording")
+        self.text(f"`data/{self.stage}/{self.stage}.rrd` shows one item at a time: step the "
+                  f"`{timeline}` timeline to go from item to item (`rerun data/{self.stage}/"
+                  f"{self.stage}.rrd`). Below, the recording as Rerun's web viewer opens it "
+                  f"(screenshot by `make review`, in headless Chromium).")
+        self._parts.append(f"![{self.stage} in Rerun](rerun.png)\n")
+
     def write(self) -> Path:
         path = self.dir / "report.md"
         write_text_atomic(path, "\n".join(self._parts))

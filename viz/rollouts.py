@@ -1,10 +1,17 @@
-"""Rerun recording of sim_eval rollouts: Panda links, the held object, the support and the
-SKT, one rollout after another on the ``step`` timeline (support frame, like every stage).
+"""Rerun recording of sim_eval rollouts, one trial at a time (support frame, like every stage).
 
-    world/robot/link_<k>            Panda visual meshes, posed every recorded step
-    world/rollouts/<n>/support      the support of rollout n (shown during it only)
-    world/rollouts/<n>/object       the object, posed every recorded step
-    world/rollouts/<n>/skt          the SKT executed (keypoint path)
+Timelines: ``trial`` (trial n at n: its final state) and ``step`` (physics steps, trial after
+trial, to replay each rollout).
+
+    world/robot/link_<k>              Panda visual meshes (static), posed every recorded step;
+                                      scaled to nothing during floating-hand trials (no arm)
+    world/trials/<n>/support          the support of trial n
+    world/trials/<n>/object           the object, posed every recorded step
+    world/trials/<n>/skt              the SKT executed (keypoint path, the method's colour)
+    world/trials/<n>/skt/frames       its waypoint frames
+    world/trials/<n>/keypoint_trail   where the object's keypoint actually went
+    plots/keypoint_to_skt_mm          the keypoint's distance from the SKT, every recorded step
+    item/info                         trial, method, support, object, verdict
 """
 
 from pathlib import Path
@@ -12,14 +19,19 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 import rerun as rr
+import rerun.blueprint as rrb
 import trimesh
 
 from skt_lib.geometry.se3 import pose_matrix
+from skt_lib.planning.trajectory import resample, skt_frames
 from skt_lib.sim.robot import Panda
 from skt_lib.sim.world import World
-from viz.rerun_log import recording
+from viz.rerun_log import (METHOD_RGB, SKT_EYE, SKT_LOOK_AT, ItemTimeline, item_blueprint,
+                           log_frames, log_mesh, log_strip, recording)
 
 _ROBOT_RGBA = (0.85, 0.85, 0.88, 1.0)
+_SUPPORT_RGBA = (0.55, 0.4, 0.25, 1.0)
+_OBJECT_RGBA = (0.2, 0.6, 0.9, 1.0)
 _GAP = 50  # empty steps between rollouts
 
 
@@ -47,37 +59,60 @@ def _transform(rec, entity: str, t: np.ndarray) -> None:
     rec.log(entity, rr.Transform3D(translation=t[:3, 3], mat3x3=t[:3, :3]))
 
 
+def distance_to_path(point: np.ndarray, path: np.ndarray) -> float:
+    """Distance from ``point`` (3,) to the polyline ``path`` (M, 3)."""
+    if len(path) == 1:
+        return float(np.linalg.norm(path[0] - point))
+    a, ab = path[:-1], np.diff(path, axis=0)
+    t = np.einsum("ij,ij->i", point - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
+    closest = a + np.clip(t, 0.0, 1.0)[:, None] * ab
+    return float(np.min(np.linalg.norm(closest - point, axis=1)))
+
+
+def rollouts_blueprint() -> rrb.Blueprint:
+    return item_blueprint("sim_eval: one trial at a time (scrub `step` to replay it)", "trial",
+                          SKT_EYE, SKT_LOOK_AT,
+                          side=(rrb.TimeSeriesView(origin="plots", name="keypoint to SKT (mm)"),))
+
+
 def log_rollouts(path: Path, replay: list, support_meshes: dict, object_meshes: dict,
                  base: tuple[float, float, float]) -> None:
-    """``replay``: [(TrialTask, run_trial result with a trace)]."""
+    """``replay``: [(TrialTask, run_trial result with a trace)], recorded failures first, then
+    successes (each in the given order): the viewer opens on the last trial, a success."""
+    replay = sorted(replay, key=lambda tr: bool(tr[1]["row"]["success"]))
     links = robot_meshes(base)
-    with recording("sim_eval", path, "sim_eval rollouts") as rec:
+    with recording("sim_eval", path, "sim_eval rollouts", rollouts_blueprint()) as rec:
         for k, (v, f) in links.items():
-            rec.log(f"world/robot/link_{k}/mesh",
-                    rr.Mesh3D(vertex_positions=v.astype(np.float32), triangle_indices=f.astype(np.uint32),
-                              albedo_factor=list(_ROBOT_RGBA)), static=True)
-        step = 0
+            log_mesh(rec, f"world/robot/link_{k}", v, f, _ROBOT_RGBA, static=True)
+        items, step = ItemTimeline(rec, "trial"), 0
         for n, (task, result) in enumerate(replay):
             row, frames = result["row"], result["trace"]
-            name = f"world/rollouts/{n:02d}_{task.method}_{row['failure_reason'] or 'success'}"
-            rec.set_time("step", sequence=step)
+            name = f"world/trials/{n:02d}"
+            verdict = "success" if row["success"] else f"failed: {row['failure_reason']}"
+            items.next(name, f"{task.trial_id}: {verdict}", times={"step": step},
+                       method=task.method, support=task.support_id, object=task.object_id,
+                       level=row["difficulty"], category=row["category"], grasp=row["grasp"] or "-",
+                       max_track_err_mm=1000 * row["max_track_err_m"], detail=row["detail"] or "-")
+            panda = bool(frames) and frames[0]["links"] is not None  # None: the floating hand
+            rec.log("world/robot", rr.Transform3D(scale=1.0 if panda else 0.0))
             sm, om = support_meshes[task.support_id], object_meshes[task.object_id]
-            rec.log(f"{name}/support", rr.Mesh3D(vertex_positions=sm.vertices.astype(np.float32),
-                                                 triangle_indices=sm.faces.astype(np.uint32),
-                                                 albedo_factor=[0.55, 0.4, 0.25, 1.0]))
-            rec.log(f"{name}/object/mesh", rr.Mesh3D(vertex_positions=om.vertices.astype(np.float32),
-                                                     triangle_indices=om.faces.astype(np.uint32),
-                                                     albedo_factor=[0.2, 0.6, 0.9, 1.0]))
-            rec.log(f"{name}/skt", rr.LineStrips3D([np.asarray(task.positions)], colors=[(230, 60, 40)],
-                                                   radii=0.001))
-            rec.log(name, rr.TextDocument(f"{task.trial_id}: {row['failure_reason'] or 'success'} "
-                                          f"({row['difficulty']}, {row['category']})"))
+            log_mesh(rec, f"{name}/support", sm.vertices, sm.faces, _SUPPORT_RGBA)
+            log_mesh(rec, f"{name}/object", om.vertices, om.faces, _OBJECT_RGBA, pose=np.eye(4))
+            skt = np.asarray(task.positions, dtype=np.float64)
+            rgb = METHOD_RGB.get(task.method, (230, 60, 40))
+            log_strip(rec, f"{name}/skt", skt, rgb=rgb, radius=0.0012)
+            log_frames(rec, f"{name}/skt/frames", skt_frames(resample(skt, 10)), 0.008)
+            keypoint = np.asarray(task.keypoint, dtype=np.float64).reshape(4, 4)
+            trail = []
             for frame in frames:
                 rec.set_time("step", sequence=step + frame["step"])
-                if frame["links"] is not None:  # None: the floating hand (no robot)
+                if panda:
                     for k in links:
-                        _transform(rec, f"world/robot/link_{k}", World.to_support(frame["links"][k]))
+                        _transform(rec, f"world/robot/link_{k}",
+                                   World.to_support(frame["links"][k]))
                 _transform(rec, f"{name}/object", frame["object"])
+                trail.append((frame["object"] @ keypoint)[:3, 3])
+                log_strip(rec, f"{name}/keypoint_trail", np.asarray(trail), rgb=(250, 250, 250))
+                error_mm = 1000 * distance_to_path(trail[-1], skt)
+                rec.log("plots/keypoint_to_skt_mm", rr.Scalars(error_mm))
             step += (frames[-1]["step"] if frames else 0) + _GAP
-            rec.set_time("step", sequence=step - 1)
-            rec.log(name, rr.Clear(recursive=True))

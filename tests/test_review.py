@@ -1,0 +1,126 @@
+"""Recordings made for review: one item at a time on each item timeline, labelled; and, where a
+browser is installed, what Rerun's web viewer actually draws."""
+
+from pathlib import Path
+
+import pytest
+
+from viz.recording_query import item_labels, visible_entities
+
+# stage: {item timeline: entity prefix of the items}
+ITEM_RECORDINGS = {
+    "mesh_gen": {"support": "/world/supports/", "object": "/world/objects/"},
+    "contact_sim": {"support": "/world/supports/", "object": "/world/objects/"},
+    "rotation_extraction": {"object": "/world/objects/"},
+    "rrt_skts": {"support": "/world/supports/"},
+    "render_views": {"support": "/world/supports/"},
+    "affordance_maps": {"support": "/world/supports/"},
+    "sim_eval": {"trial": "/world/trials/"},
+}
+
+
+def _rrd(tiny_dataset, tiny_evaluated, stage: str) -> Path:
+    data = tiny_evaluated[2].parent if stage == "sim_eval" else tiny_dataset[1]
+    return data / stage / f"{stage}.rrd"
+
+
+def _item(entity: str, prefix: str) -> str | None:
+    return entity[len(prefix):].split("/")[0] if entity.startswith(prefix) else None
+
+
+@pytest.mark.parametrize("stage", sorted(ITEM_RECORDINGS))
+def test_each_time_of_an_item_timeline_shows_exactly_one_labelled_item(stage, tiny_dataset,
+                                                                        tiny_evaluated):
+    rrd = _rrd(tiny_dataset, tiny_evaluated, stage)
+    for timeline, prefix in ITEM_RECORDINGS[stage].items():
+        shown = visible_entities(rrd, timeline)
+        labels = item_labels(rrd, timeline)
+        assert len(shown) >= 2, f"{stage}/{timeline}: {len(shown)} items"
+        assert sorted(shown) == list(range(len(shown))) == sorted(labels)
+        items = []
+        for t, entities in shown.items():
+            present = {i for e in entities if (i := _item(e, prefix))}
+            assert len(present) == 1, f"{stage}/{timeline}@{t}: items {sorted(present)}"
+            (item,) = present
+            if timeline != "trial":  # supports and objects are named by their id
+                assert item in labels[t].splitlines()[0], (t, item, labels[t][:80])
+            items.append(item)
+        assert len(set(items)) == len(items), f"{stage}/{timeline}: an item shown twice: {items}"
+
+
+@pytest.mark.browser
+@pytest.mark.parametrize("stage", ["mesh_gen", "render_views", "affordance_maps", "rrt_skts",
+                                   "sim_eval"])
+def test_web_viewer_draws_the_last_item_with_its_label(stage, tiny_dataset, tiny_evaluated,
+                                                       tmp_path):
+    from viz.screenshot import missing_tools, read_text, screenshot, squash
+
+    if missing := missing_tools(ocr=True):
+        pytest.skip(f"no browser screenshots here: missing {', '.join(missing)}")
+    rrd = _rrd(tiny_dataset, tiny_evaluated, stage)
+    timeline = next(iter(ITEM_RECORDINGS[stage]))
+    labels = item_labels(rrd, timeline)
+    title = labels[max(labels)].splitlines()[0].lstrip("# ")
+    shot = screenshot(rrd, tmp_path / "shot.png")
+    # The viewer opens at the end of the timeline: the last item, alone and framed.
+    assert shot.view_fill >= 0.01, f"3D view nearly empty ({shot.view_fill:.4f})"
+    text = squash(read_text(shot.path))
+    key = title.split(":")[0].split("/")[1:] if stage == "sim_eval" else [title]
+    assert all(squash(k) in text for k in key), f"label {title!r} not read in {text[:300]!r}"
+
+
+def test_representatives_take_the_first_item_of_each_value():
+    from viz.rerun_log import item_markdown
+    from viz.review_recording import representatives
+
+    levels = ["easy", "easy", "hard", "normal", "hard", "very_hard", "normal"]
+    labels = {t: item_markdown(f"support_{t:05d}", {"level": lv, "family": "peg"})
+              for t, lv in enumerate(levels)}
+    assert representatives(labels, "level") == [0, 2, 3, 5]
+    assert representatives(labels, "level", limit=2) == [0, 2]
+    assert representatives(labels, "family") == [0]
+
+
+def test_distance_to_path_is_to_the_polyline_not_its_vertices():
+    import numpy as np
+
+    from viz.rollouts import distance_to_path
+
+    path = np.array([[0.0, 0, 0], [1.0, 0, 0], [1.0, 1.0, 0]])
+    assert distance_to_path(np.array([0.5, 0.2, 0.0]), path) == pytest.approx(0.2)
+    assert distance_to_path(np.array([1.3, 0.5, 0.0]), path) == pytest.approx(0.3)
+    assert distance_to_path(np.array([-1.0, 0.0, 0.0]), path) == pytest.approx(1.0)
+    assert distance_to_path(np.array([2.0, 2.0, 2.0]), path[:1]) == pytest.approx(np.sqrt(12))
+
+
+def test_combined_review_has_each_stage_one_representative_at_a_time(tiny_dataset,
+                                                                      tiny_evaluated, tmp_path):
+    import subprocess
+    import sys
+
+    from viz.review_recording import REVIEW, build_review
+
+    root = tmp_path / "data"
+    root.mkdir()
+    for stage in REVIEW:
+        (root / stage).symlink_to(_rrd(tiny_dataset, tiny_evaluated, stage).parent)
+    kept = build_review(root, tmp_path / "review.rrd")
+    assert set(kept) == set(REVIEW) and all(n >= 2 for n in kept.values()), kept
+    done = subprocess.run([sys.executable, "-m", "rerun", "rrd", "verify",
+                           str(tmp_path / "review.rrd")], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    for timeline in ("support", "object", "trial"):
+        stages = [s for s, spec in REVIEW.items() if spec[0] == timeline]
+        shown = visible_entities(tmp_path / "review.rrd", timeline)
+        assert sorted(shown) == list(range(max(kept[s] for s in stages)))
+        for t, entities in shown.items():
+            for stage in stages:
+                prefix = f"/{stage}{ITEM_RECORDINGS[stage][timeline]}"
+                present = {i for e in entities if (i := _item(e, prefix))}
+                assert len(present) == (1 if t < kept[stage] else 0), (stage, t, present)
+    # representatives: one per difficulty level, object category, method
+    for stage, (timeline, field, _, _) in REVIEW.items():
+        labels = item_labels(tmp_path / "review.rrd", timeline, f"/{stage}/item/info")
+        values = [next(line for line in text.splitlines() if line.startswith(f"| {field} |"))
+                  for text in labels.values()]
+        assert len(labels) == kept[stage] and len(set(values)) == len(values), (stage, values)
