@@ -6,6 +6,9 @@ from pathlib import Path
 import pytest
 
 from viz.recording_query import item_labels, visible_entities
+from viz.screenshot import missing_tools
+
+MISSING = missing_tools(ocr=True)  # checked before the fixtures run: skipping costs nothing
 
 # stage: {item timeline: entity prefix of the items}
 ITEM_RECORDINGS = {
@@ -49,14 +52,13 @@ def test_each_time_of_an_item_timeline_shows_exactly_one_labelled_item(stage, ti
 
 
 @pytest.mark.browser
+@pytest.mark.skipif(bool(MISSING), reason=f"no browser screenshots here: missing {', '.join(MISSING)}")
 @pytest.mark.parametrize("stage", ["mesh_gen", "render_views", "affordance_maps", "rrt_skts",
                                    "sim_eval"])
 def test_web_viewer_draws_the_last_item_with_its_label(stage, tiny_dataset, tiny_evaluated,
                                                        tmp_path):
-    from viz.screenshot import missing_tools, read_text, screenshot, squash
+    from viz.screenshot import read_text, screenshot, squash
 
-    if missing := missing_tools(ocr=True):
-        pytest.skip(f"no browser screenshots here: missing {', '.join(missing)}")
     rrd = _rrd(tiny_dataset, tiny_evaluated, stage)
     timeline = next(iter(ITEM_RECORDINGS[stage]))
     labels = item_labels(rrd, timeline)
