@@ -45,7 +45,9 @@ def test_each_time_of_an_item_timeline_shows_exactly_one_labelled_item(stage, ti
             present = {i for e in entities if (i := _item(e, prefix))}
             assert len(present) == 1, f"{stage}/{timeline}@{t}: items {sorted(present)}"
             (item,) = present
-            if timeline != "trial":  # supports and objects are named by their id
+            if timeline == "trial":  # trial n of the recording is shown at time n
+                assert item == f"{t:02d}", (t, item)
+            else:  # supports and objects are named by their id in the label
                 assert item in labels[t].splitlines()[0], (t, item, labels[t][:80])
             items.append(item)
         assert len(set(items)) == len(items), f"{stage}/{timeline}: an item shown twice: {items}"
