@@ -16,10 +16,9 @@ import torch
 from dvclive import Live
 
 from skt_lib.config import load_params
-from skt_lib.errors import DataError
 from skt_lib.geometry.export import read_obj
-from skt_lib.io import read_npz, read_table
-from skt_lib.learning.data import load_supports
+from skt_lib.io import read_table
+from skt_lib.learning.data import load_training_set
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.learning.train import from_params, predict_items, summarise, train_sctdn
 from skt_lib.schemas import SUPPORTS
@@ -35,16 +34,9 @@ def main(argv=None) -> int:
     params = load_params(args.params)
     p = params.train
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
-    tz = read_npz(root / "clustering" / "templates.npz", {"templates": ("float64", 3)})
-    T, k = int(tz["T"]), int(tz["k"])
-    supports = load_supports(root, T)
-    train = [s for s in supports if s.split == "train"]
-    val = [s for s in supports if s.split == "val"]
-    if not train or not val:
-        raise DataError(f"{root / 'mesh_gen'}: {len(train)} training and {len(val)} validation "
-                        "supports with labels; model selection needs both (set "
-                        "mesh_gen.n_val_per_level ≥ 1) — it never selects on training supports")
-    cfg, settings = from_params(p, k, T, supports[0].points.shape[1])
+    data = load_training_set(root)
+    T, k, train, val = data.T, data.k, data.train, data.val
+    cfg, settings = from_params(p, k, T, data.n_points)
     history: list[dict] = []
     t0 = time.perf_counter()
     with Live(dir=str(rep / "live"), save_dvc_exp=False, dvcyaml=None, report=None) as live:
@@ -56,7 +48,7 @@ def main(argv=None) -> int:
             history.append(metrics)
             log.info("epoch %d: %s", epoch, {k: v if v is None else round(v, 4) for k, v in metrics.items()})
 
-        model, best = train_sctdn(cfg, tz["templates"], train, val, settings,
+        model, best = train_sctdn(cfg, data.templates, train, val, settings,
                                   params.common.seed, on_epoch)
     wall = time.perf_counter() - t0
     predictor = SktPredictor(model)

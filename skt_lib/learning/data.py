@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skt_lib.errors import DataError
 from skt_lib.io import read_npz, read_table
 from skt_lib.perception.views import RENDER_SPEC
 from skt_lib.planning.trajectory import resample
@@ -43,6 +44,40 @@ def load_supports(root: Path, T: int) -> list[SupportData]:
                                np.asarray(contacts.loc[row.support_id, "contact_support"]),
                                aff["contact_map"], aff["contact_visible"], row.difficulty))
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class TrainingSet:
+    templates: np.ndarray  # (k, T, 3) family templates, metres relative to ξ_0
+    train: list[SupportData]
+    val: list[SupportData]
+
+    @property
+    def T(self) -> int:
+        return self.templates.shape[1]
+
+    @property
+    def k(self) -> int:
+        return self.templates.shape[0]
+
+    @property
+    def n_points(self) -> int:
+        return self.train[0].points.shape[1]
+
+
+def load_training_set(root: Path) -> TrainingSet:
+    """The templates of ``clustering`` and the training and validation supports; a
+    :class:`DataError` when either split is empty (model selection is on validation
+    supports, never on training ones)."""
+    tz = read_npz(root / "clustering" / "templates.npz", {"templates": ("float64", 3)})
+    supports = load_supports(root, int(tz["T"]))
+    train = [s for s in supports if s.split == "train"]
+    val = [s for s in supports if s.split == "val"]
+    if not train or not val:
+        raise DataError(f"{root / 'mesh_gen'}: {len(train)} training and {len(val)} validation "
+                        "supports with labels; model selection needs both (set "
+                        "mesh_gen.n_val_per_level ≥ 1) — it never selects on training supports")
+    return TrainingSet(tz["templates"], train, val)
 
 
 def normalise(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -6,6 +6,11 @@ Inputs are normalised clouds: ``xyz_n = (xyz − centroid) / scale`` with ``scal
 point radius, per cloud. Templates are stored in metres relative to ξ_0 and scaled into
 each cloud's normalised frame. Deviation from the paper: classification and segmentation
 share one PointNet++ encoder (the global feature feeds the classifier) — half the compute.
+
+``condition`` picks the feature the deformation is conditioned on (paper Table II):
+``"shape"`` (full SCTDN: max-pool of the per-point features where the affordance exceeds
+``aff_threshold``) or ``"contact_point"`` (the ablation: the per-point feature at the contact
+point only).
 """
 
 import json
@@ -16,6 +21,8 @@ from torch import nn
 from torch.nn import functional as F
 
 from skt_lib.learning.pointnet2 import FeaturePropagation, SetAbstraction
+
+CONDITIONS = ("shape", "contact_point")
 
 
 @dataclass(frozen=True)
@@ -28,8 +35,11 @@ class SctdnConfig:
     aff_threshold: float = 0.1
     centres: tuple[int, int, int] | None = None  # set-abstraction centres per level (None: N/4, N/16, N/64)
     nsample: int = 16  # neighbours grouped per centre
+    condition: str = "shape"  # "shape" | "contact_point": the deformation's conditioning feature
 
     def __post_init__(self):
+        if self.condition not in CONDITIONS:
+            raise ValueError(f"condition: expected one of {CONDITIONS}, got {self.condition!r}")
         n = self.n_points
         centres = self.centres or (max(n // 4, 3), max(n // 16, 3), max(n // 64, 3))
         object.__setattr__(self, "centres", tuple(int(c) for c in centres))
@@ -52,14 +62,7 @@ class Sctdn(nn.Module):
             raise ValueError(f"templates: expected ({cfg.k}, {cfg.T}, 3), got {tuple(templates.shape)}")
         self.cfg = cfg
         self.register_buffer("templates", templates.float())  # metres, relative to ξ_0
-        c1, c2, c3 = cfg.centres
-        self.sa1 = SetAbstraction(c1, 0.1, cfg.nsample, [3, 32, 32, 64])
-        self.sa2 = SetAbstraction(c2, 0.2, cfg.nsample, [64 + 3, 64, 64, 128])
-        self.sa3 = SetAbstraction(c3, 0.4, cfg.nsample, [128 + 3, 128, 128, 256])
-        self.sa_global = SetAbstraction(None, 0.0, 0, [256 + 3, 256, 256])
-        self.fp3 = FeaturePropagation([256 + 128, 256, 128])
-        self.fp2 = FeaturePropagation([128 + 64, 128, 128])
-        self.fp1 = FeaturePropagation([128, cfg.feat_dim, cfg.feat_dim])
+        add_backbone(self, cfg.centres, cfg.nsample, cfg.feat_dim)
         self.cls_head = nn.Sequential(nn.Linear(256, 128), nn.ReLU(), nn.Dropout(0.3), nn.Linear(128, cfg.k))
         self.aff_head = nn.Conv1d(cfg.feat_dim, 1, 1)
         self.wp_mlp = nn.Sequential(nn.Linear(3, 64), nn.ReLU(), nn.Linear(64, 32), nn.ReLU(),
@@ -72,14 +75,8 @@ class Sctdn(nn.Module):
     def forward(self, xyz_n, scale, family=None, contact_n=None) -> dict[str, torch.Tensor]:
         """``xyz_n (B, N, 3)``, ``scale (B,)``; ``family (B,)`` and ``contact_n (B, 3)`` given
         during training (teacher forcing), predicted when ``None``."""
-        l1_xyz, l1 = self.sa1(xyz_n, None)
-        l2_xyz, l2 = self.sa2(l1_xyz, l1)
-        l3_xyz, l3 = self.sa3(l2_xyz, l2)
-        _, g = self.sa_global(l3_xyz, l3)
-        logits = self.cls_head(g[..., 0])
-        f2 = self.fp3(l2_xyz, l3_xyz, l2, l3)
-        f1 = self.fp2(l1_xyz, l2_xyz, l1, f2)
-        feats = self.fp1(xyz_n, l1_xyz, None, f1)  # (B, C, N)
+        g, feats = backbone_features(self, xyz_n)
+        logits = self.cls_head(g)
         aff_logits = self.aff_head(feats)[:, 0]  # (B, N)
         aff = torch.sigmoid(aff_logits)
         if family is None:
@@ -87,11 +84,45 @@ class Sctdn(nn.Module):
         if contact_n is None:
             contact_n = xyz_n[torch.arange(len(xyz_n)), aff.argmax(-1)]
         aligned = contact_n[:, None] + self.templates[family] / scale[:, None, None]
-        shape = masked_max_pool(feats, aff, self.cfg.aff_threshold)
+        if self.cfg.condition == "shape":
+            shape = masked_max_pool(feats, aff, self.cfg.aff_threshold)
+        else:
+            shape = feature_at(feats, xyz_n, contact_n)
         x = torch.cat([self.wp_mlp(aligned), shape[:, None].expand(-1, aligned.shape[1], -1)], -1)
         traj = aligned + self.offset(self.lstm(x)[0])
         return {"logits": logits, "affordance": aff, "affordance_logits": aff_logits,
                 "aligned": aligned, "trajectory": traj}
+
+
+def add_backbone(module: nn.Module, centres, nsample: int, feat_dim: int) -> None:
+    """The shared PointNet++ segmentation backbone as attributes ``sa1 … fp1`` of ``module``
+    (three set abstractions, a global one, three feature propagations)."""
+    c1, c2, c3 = centres
+    module.sa1 = SetAbstraction(c1, 0.1, nsample, [3, 32, 32, 64])
+    module.sa2 = SetAbstraction(c2, 0.2, nsample, [64 + 3, 64, 64, 128])
+    module.sa3 = SetAbstraction(c3, 0.4, nsample, [128 + 3, 128, 128, 256])
+    module.sa_global = SetAbstraction(None, 0.0, 0, [256 + 3, 256, 256])
+    module.fp3 = FeaturePropagation([256 + 128, 256, 128])
+    module.fp2 = FeaturePropagation([128 + 64, 128, 128])
+    module.fp1 = FeaturePropagation([128, feat_dim, feat_dim])
+
+
+def backbone_features(module: nn.Module, xyz_n: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(global feature ``(B, 256)``, per-point features ``(B, feat_dim, N)``) of the backbone
+    that :func:`add_backbone` put on ``module``."""
+    l1_xyz, l1 = module.sa1(xyz_n, None)
+    l2_xyz, l2 = module.sa2(l1_xyz, l1)
+    l3_xyz, l3 = module.sa3(l2_xyz, l2)
+    _, g = module.sa_global(l3_xyz, l3)
+    f2 = module.fp3(l2_xyz, l3_xyz, l2, l3)
+    f1 = module.fp2(l1_xyz, l2_xyz, l1, f2)
+    return g[..., 0], module.fp1(xyz_n, l1_xyz, None, f1)
+
+
+def feature_at(feats: torch.Tensor, xyz_n: torch.Tensor, point_n: torch.Tensor) -> torch.Tensor:
+    """The per-point feature ``(B, C)`` of the cloud point nearest ``point_n (B, 3)``."""
+    idx = torch.linalg.norm(xyz_n - point_n[:, None], dim=-1).argmin(-1)
+    return feats[torch.arange(len(feats)), :, idx]
 
 
 def masked_max_pool(feats: torch.Tensor, aff: torch.Tensor, threshold: float) -> torch.Tensor:

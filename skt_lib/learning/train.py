@@ -126,15 +126,19 @@ def reproducible(threads: int):
         torch.use_deterministic_algorithms(old_det)
 
 
-def train_sctdn(cfg: SctdnConfig, templates: np.ndarray, train: list[SupportData],
-                val: list[SupportData], st: TrainSettings, seed: int,
-                on_epoch: Callable[[int, dict], None] | None = None) -> tuple[Sctdn, dict]:
-    """Train; returns (model with the best validation weights, its validation metrics).
-    Torch's global RNG is used only inside ``fork_rng`` (nothing leaks to the caller)."""
+def fit(make_model: Callable[[], torch.nn.Module], batch_loss, validate, train: list[SupportData],
+        st: TrainSettings, seed: int, on_epoch: Callable[[int, dict], None] | None = None,
+        select: str = "val_traj_l2_mm") -> tuple[torch.nn.Module, dict]:
+    """The training loop shared by SCTDN and the baselines: Adam + cosine decay over
+    ``st.epochs``; each epoch draws ``st.views_per_epoch`` random views of every training
+    support and steps on ``batch_loss(model, batch) -> (loss, {part: float})``; then
+    ``validate(model) -> metrics`` and keeps the weights with the lowest ``metrics[select]``.
+    Returns (model with those weights, their metrics). Torch's global RNG is used only inside
+    ``fork_rng`` (nothing leaks to the caller); ``make_model`` runs right after it is seeded."""
     rng = np.random.default_rng(seed)
     with torch.random.fork_rng(), reproducible(st.threads):
         torch.manual_seed(seed)
-        model = Sctdn(cfg, torch.as_tensor(templates))
+        model = make_model()
         opt = torch.optim.Adam(model.parameters(), lr=st.lr, weight_decay=st.weight_decay)
         sched = torch.optim.lr_scheduler.CosineAnnealingLR(
             opt, T_max=max(st.epochs - 1, 1), eta_min=st.lr * st.lr_final_ratio)
@@ -146,20 +150,32 @@ def train_sctdn(cfg: SctdnConfig, templates: np.ndarray, train: list[SupportData
             order = rng.permutation(len(items))
             losses = []
             for i in range(0, len(order), st.batch_size):
-                b = make_batch([items[j] for j in order[i: i + st.batch_size]])
-                out = model(b["xyz"], b["scale"], b["family"], b["contact"])
-                loss, parts = sctdn_loss(out, b["gt"], b["valid"], b["aff"], b["family"],
-                                         b["contact_target"], w_contact=st.contact_weight)
+                batch = make_batch([items[j] for j in order[i: i + st.batch_size]])
+                loss, parts = batch_loss(model, batch)
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
-                losses.append(parts | {"loss": float(loss)})
+                losses.append(parts | {"loss": loss.item()})
             sched.step()
             metrics = {f"train_{k}": float(np.mean([x[k] for x in losses])) for k in losses[0]}
-            metrics |= evaluate(model, val, st.val_views)
+            metrics |= validate(model)
             if on_epoch:
                 on_epoch(epoch, metrics)
-            if best is None or metrics["val_traj_l2_mm"] < best["val_traj_l2_mm"]:
+            if best is None or metrics[select] < best[select]:
                 best, best_state = metrics, copy.deepcopy(model.state_dict())
         model.load_state_dict(best_state)
     return model, best
+
+
+def train_sctdn(cfg: SctdnConfig, templates: np.ndarray, train: list[SupportData],
+                val: list[SupportData], st: TrainSettings, seed: int,
+                on_epoch: Callable[[int, dict], None] | None = None) -> tuple[Sctdn, dict]:
+    """Train SCTDN (or its ablation, ``cfg.condition``); returns (model with the best
+    validation weights, its validation metrics)."""
+    def batch_loss(model, b):
+        out = model(b["xyz"], b["scale"], b["family"], b["contact"])
+        return sctdn_loss(out, b["gt"], b["valid"], b["aff"], b["family"], b["contact_target"],
+                          w_contact=st.contact_weight)
+
+    return fit(lambda: Sctdn(cfg, torch.as_tensor(templates)), batch_loss,
+               lambda model: evaluate(model, val, st.val_views), train, st, seed, on_epoch)
