@@ -221,9 +221,32 @@ class TrainParams(_Section):
     threads: int = Field(ge=1, le=256, description="Torch CPU threads while training (fixed, not the core count: float sums depend on it, so the same value gives the same weights on any machine).")
 
 
+BASELINE_MODELS = ("sctdn_cp_feature", "vatmart", "vatmart_mod")
+METHODS = ("oracle", "oracle_floating", "template_only", "sctdn", "kpam", *BASELINE_MODELS,
+           "omnihang")
+
+
+class TrainBaselinesParams(_Section):
+    models: tuple[Literal[BASELINE_MODELS], ...] = Field(
+        description="Baselines trained with train's loop, data and budget: sctdn_cp_feature (Table II ablation: deformation conditioned on the contact-point feature), vatmart (CVAE on the contact-point feature), vatmart_mod (CVAE on the shape-conditioned feature).")
+    latent_dim: int = Field(ge=1, le=1024, description="VAT-Mart CVAE latent width (paper: 128).")
+    hidden: int = Field(ge=8, le=4096, description="VAT-Mart CVAE encoder/decoder MLP width.")
+    n_control_points: int = Field(ge=2, le=1000, description="VAT-Mart decoder: control points, linearly interpolated to the clustering.T waypoints (≤ T).")
+    vatmart_kl_weight: float = Field(ge=0.0, le=10.0, description="KL weight of vatmart (paper: 0.1).")
+    vatmart_mod_kl_weight: float = Field(ge=0.0, le=10.0, description="KL weight of vatmart_mod (paper: 0.01).")
+
+    @model_validator(mode="after")
+    def _unique(self) -> "TrainBaselinesParams":
+        if len(set(self.models)) != len(self.models):
+            raise ValueError(f"models: duplicate entries in {list(self.models)}")
+        return self
+
+
 class SimEvalParams(_Section):
-    methods: tuple[Literal["oracle", "oracle_floating", "template_only", "sctdn", "kpam"], ...] = Field(
-        min_length=1, description="Methods evaluated (Table I rows); oracle_floating: the oracle SKT carried by a floating hand (no arm).")
+    methods: tuple[Literal[METHODS], ...] = Field(
+        min_length=1, description="Methods evaluated (Table I rows); oracle_floating: the oracle SKT carried by a floating hand (no arm); sctdn_cp_feature, vatmart, vatmart_mod need train_baselines to train them; omnihang plans with OMPL on the cloud, given the ground-truth hang.")
+    n_proposals: int = Field(ge=1, le=100, description="VAT-Mart methods: proposals per support; a (support, object) trial succeeds if any proposal hangs (the paper's count); success_single counts the first proposal only.")
+    omnihang_time_limit_s: float = Field(gt=0.0, le=600.0, description="omnihang: RRT-Connect time limit per support (a failed plan falls back to the straight approach).")
     robot_base_m: tuple[float, float, float] = Field(description="World position of the Panda base, m.")
     grasp_pitch_deg: tuple[float, ...] = Field(
         min_length=1, description="Grasp candidates: approach axis pitched down from keypoint +x, degrees, tried in this order.")
@@ -272,7 +295,17 @@ class Params(_Section):
     affordance_maps: AffordanceMapsParams
     clustering: ClusteringParams
     train: TrainParams
+    train_baselines: TrainBaselinesParams
     sim_eval: SimEvalParams
+
+    @model_validator(mode="after")
+    def _baselines_trained(self) -> "Params":
+        untrained = [m for m in self.sim_eval.methods
+                     if m in BASELINE_MODELS and m not in self.train_baselines.models]
+        if untrained:
+            raise ValueError(f"sim_eval.methods: {untrained} evaluated but not trained (add them "
+                             "to train_baselines.models)")
+        return self
 
 
 def _format_error(source: str, err: ValidationError) -> str:

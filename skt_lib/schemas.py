@@ -122,7 +122,7 @@ LABELS = TableSchema(
 
 TRIALS = TableSchema(
     "trials",
-    2,
+    3,
     {
         "trial_id": pa.string(),
         "method": pa.string(),
@@ -139,5 +139,6 @@ TRIALS = TableSchema(
         "blocked_by": pa.string(),
         "grasp": pa.string(),
         "detail": pa.string(),
+        "proposal": pa.int32(),  # 0, or which proposal of a proposing method (VAT-Mart)
     },
 )

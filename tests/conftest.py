@@ -27,7 +27,11 @@ TINY = {
     "affordance_maps": {'sigma_m': 0.005, 'alpha': 0.5, 'beta': 0.5, 'hanging_part_m': 0.03, 'visible_tol_m': 0.005},
     "clustering": {'T': 10, 'k': 3, 'n_init': 10, 'max_iter': 300},
     "train": {'epochs': 1, 'views_per_epoch': 1, 'batch_size': 16, 'lr': 0.001, 'lr_final_ratio': 0.05, 'weight_decay': 0.0001, 'val_views': [0], 'centres': [128, 32, 8], 'nsample': 16, 'feat_dim': 64, 'lstm_hidden': 64, 'contact_weight': 0.1, 'threads': 1},
-    "sim_eval": {"methods": ["oracle", "oracle_floating", "template_only", "sctdn", "kpam"],
+    "train_baselines": {"models": ["sctdn_cp_feature", "vatmart", "vatmart_mod"], "latent_dim": 16,
+                        "hidden": 64, "n_control_points": 4, "vatmart_kl_weight": 0.1, "vatmart_mod_kl_weight": 0.01},
+    "sim_eval": {"methods": ["oracle", "oracle_floating", "template_only", "sctdn", "kpam",
+                             "vatmart", "omnihang"],
+                 "n_proposals": 3, "omnihang_time_limit_s": 5.0,
                  "robot_base_m": [0.15, 0.0, 0.3], "grasp_pitch_deg": [45.0, 30.0, 60.0],
                  "grasp_rolls_deg": [0.0, 180.0], "setup_clearance_m": 0.002, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,
                  "track_tol_m": 0.02, "ik_tol_m": 0.002, "ik_tol_rad": 0.02, "max_joint_step_rad": 0.2,
@@ -62,12 +66,12 @@ def write_params(tmp_path):
 
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
-    """mesh_gen → … → clustering, run once on TINY params.
+    """mesh_gen → … → train_baselines, run once on TINY params.
 
     Returns (params path, data root, reports root)."""
     from stages import (
         affordance_maps, clustering, contact_sim, mesh_gen, render_views, rotation_extraction,
-        rrt_skts, train,
+        rrt_skts, train, train_baselines,
     )
 
     root = tmp_path_factory.mktemp("tiny")
@@ -75,7 +79,7 @@ def tiny_dataset(tmp_path_factory):
     params.write_text(yaml.safe_dump(TINY))
     data, reports = root / "data", root / "reports"
     for stage in (mesh_gen, contact_sim, rotation_extraction, rrt_skts, render_views,
-                  affordance_maps, clustering, train):
+                  affordance_maps, clustering, train, train_baselines):
         name = stage.__name__.rsplit(".", 1)[-1]
         assert stage.main(["--params", str(params), "--data-root", str(data),
                            "--data-dir", str(data / name), "--reports-dir", str(reports / name)]) == 0

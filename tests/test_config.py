@@ -62,3 +62,17 @@ def test_missing_file_and_bad_yaml(tmp_path):
     bad.write_text("common: [unclosed")
     with pytest.raises(ParamsError, match="not valid YAML"):
         load_params(bad)
+
+
+def test_an_evaluated_baseline_must_be_trained(tiny_dict):
+    tiny_dict["sim_eval"]["methods"] = ["sctdn", "vatmart_mod"]
+    tiny_dict["train_baselines"]["models"] = ["vatmart"]
+    with pytest.raises(ParamsError, match=r"sim_eval.methods: \['vatmart_mod'\] evaluated but not "
+                                          r"trained"):
+        parse_params(tiny_dict)
+    tiny_dict["train_baselines"]["models"] = ["vatmart", "vatmart"]
+    with pytest.raises(ParamsError, match="train_baselines: models: duplicate"):
+        parse_params(tiny_dict)
+    tiny_dict["train_baselines"]["models"] = ["vatmart_mod"]
+    tiny_dict["sim_eval"]["methods"] = ["sctdn", "vatmart_mod", "omnihang"]
+    assert parse_params(tiny_dict).sim_eval.methods[-1] == "omnihang"

@@ -74,7 +74,7 @@ def test_killed_stage_resumes_and_matches_uninterrupted_run(stage, tiny_dataset,
     calls = _resume_counting(monkeypatch, module, argv)
     ref = json.loads((ref_rep / "metrics.json").read_text())
     n_items = ref["n_supports"] if stage == "rrt_skts" else \
-        sum(ref[m]["n_trials"] for m in ref if isinstance(ref[m], dict) and "n_trials" in ref[m])
+        sum(v["n_sim_runs"] for v in ref.values() if isinstance(v, dict) and "n_sim_runs" in v)
     # the resumed run computed exactly the items the killed one had not saved
     assert 1 <= saved < n_items
     assert len(calls) == n_items - saved and len(before) == saved

@@ -34,6 +34,10 @@ _SUPPORT_RGBA = (0.55, 0.4, 0.25, 1.0)
 _OBJECT_RGBA = (0.2, 0.6, 0.9, 1.0)
 _GAP = 50  # empty steps between rollouts
 
+#: Colours of the Table I baselines (the pipeline methods' are viz.rerun_log.METHOD_RGB).
+BASELINE_RGB = {"sctdn_cp_feature": (240, 120, 160), "vatmart": (150, 90, 200),
+                "vatmart_mod": (100, 40, 160), "omnihang": (40, 180, 200)}
+
 
 def robot_meshes(base: tuple[float, float, float]) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Visual meshes of the Panda per body index (0 = base, k + 1 = link k), in each link's
@@ -99,7 +103,7 @@ def log_rollouts(path: Path, replay: list, support_meshes: dict, object_meshes: 
             log_mesh(rec, f"{name}/support", sm.vertices, sm.faces, _SUPPORT_RGBA)
             log_mesh(rec, f"{name}/object", om.vertices, om.faces, _OBJECT_RGBA, pose=np.eye(4))
             skt = np.asarray(task.positions, dtype=np.float64)
-            rgb = METHOD_RGB.get(task.method, (230, 60, 40))
+            rgb = {**METHOD_RGB, **BASELINE_RGB}.get(task.method, (230, 60, 40))
             log_strip(rec, f"{name}/skt", skt, rgb=rgb, radius=0.0012)
             log_frames(rec, f"{name}/skt/frames", skt_frames(resample(skt, 10)), 0.008)
             keypoint = np.asarray(task.keypoint, dtype=np.float64).reshape(4, 4)

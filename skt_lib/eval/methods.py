@@ -9,8 +9,16 @@
   the arm allows.
 - ``kpam``: kPAM 2.0 style (privileged: the ground-truth hanging keypoint): a straight line
   from a pre-hang keypoint in front of the support to just above the hang.
+- ``sctdn_cp_feature``: the Table II ablation, SCTDN deforming on the contact-point feature
+  (``train_baselines``).
+- ``vatmart`` / ``vatmart_mod``: CVAE proposals (``train_baselines``); ``propose`` gives
+  ``n_proposals`` SKTs (the paper counts a trial as hung if any of them hangs), ``predict``
+  the first of them (the honest single-sample rate).
+- ``omnihang``: OMPL RRT-Connect to the ground-truth hanging pose (privileged), collision
+  checked against the partial cloud only (:mod:`skt_lib.eval.omnihang`).
 
-Privileged methods ignore the cloud; they are constructed per support with its ground truth.
+Privileged methods use the cloud only as OmniHang does (for collision checks) or not at all;
+they are constructed per support with its ground truth.
 """
 
 from typing import Protocol
@@ -20,7 +28,12 @@ import numpy as np
 from skt_lib.learning.predictor import Skt, SktPredictor
 from skt_lib.planning.trajectory import skt_frames
 
-LEARNED = ("template_only", "sctdn")
+#: Methods that need a trained model: SktPredictor ones, then the VAT-Mart proposers.
+LEARNED = ("template_only", "sctdn", "sctdn_cp_feature")
+PROPOSING = ("vatmart", "vatmart_mod")
+#: Which trained model a learned method runs (``data/train`` or ``data/train_baselines/<name>``).
+MODEL_OF = {"template_only": "sctdn", "sctdn": "sctdn", "sctdn_cp_feature": "sctdn_cp_feature",
+            "vatmart": "vatmart", "vatmart_mod": "vatmart_mod"}
 #: Methods executed by the floating hand; every other method uses the Panda.
 FLOATING = ("oracle_floating",)
 
@@ -71,13 +84,60 @@ class Kpam:
         return _given(self.target + s * self.pre, len(cloud))
 
 
-def make_method(name: str, predictor: SktPredictor | None, gt_positions: np.ndarray,
-                pre_hang: np.ndarray, lift: float = 0.0) -> Method:
-    """The method ``name`` for one support (``gt_positions (T, 3)``, ξ_0 first)."""
-    if name in LEARNED:
+class Proposals:
+    """A proposing model (VAT-Mart): ``propose`` returns ``n`` SKTs drawn with ``rng`` (pass a
+    fresh per-support generator: the proposals are then a function of the support);
+    ``predict`` the first of them."""
+
+    def __init__(self, predictor, rng: np.random.Generator, n: int):
+        self.predictor, self.n = predictor, n
+        self.state = rng.bit_generator.state
+
+    def propose(self, cloud: np.ndarray) -> list[Skt]:
+        rng = np.random.Generator(np.random.PCG64())
+        rng.bit_generator.state = self.state  # the same draws on every call
+        return self.predictor.propose(cloud, rng, self.n)
+
+    def predict(self, cloud: np.ndarray) -> Skt:
+        return self.propose(cloud)[0]
+
+
+class OmniHang:
+    """RRT-Connect (OMPL) from in front of the support to the ground-truth hanging frame
+    ``hang (4, 4)``, the object (``object_points`` in its keypoint frame) checked against the
+    cloud; ``T`` waypoints. ``last`` keeps the last plan (``solved``, ``seconds``)."""
+
+    def __init__(self, hang: np.ndarray, object_points: np.ndarray, settings, seed: int, T: int):
+        self.hang, self.points, self.settings, self.seed, self.T = hang, object_points, settings, seed, T
+        self.last = None
+
+    def predict(self, cloud: np.ndarray) -> Skt:
+        from skt_lib.eval.omnihang import plan_omnihang
+
+        self.last = plan_omnihang(cloud, self.hang, self.points, self.T, self.settings, self.seed)
+        return _given(self.last.positions, len(cloud))
+
+
+def make_method(name: str, predictor, gt_positions: np.ndarray, pre_hang: np.ndarray,
+                lift: float = 0.0, rng: np.random.Generator | None = None, n_proposals: int = 1,
+                omnihang: tuple | None = None) -> Method:
+    """The method ``name`` for one support (``gt_positions (T, 3)``, ξ_0 first).
+
+    ``predictor``: the trained model of learned methods (:data:`MODEL_OF`); ``rng`` and
+    ``n_proposals``: the proposers' latent draws; ``omnihang``: ``(object_points,
+    OmniHangSettings, seed)``."""
+    if name in LEARNED or name in PROPOSING:
         if predictor is None:
             raise ValueError(f"{name}: needs the trained predictor")
-        return Learned(predictor, deform=name == "sctdn")
+        if name in PROPOSING:
+            if rng is None:
+                raise ValueError(f"{name}: needs a generator for its latents")
+            return Proposals(predictor, rng, n_proposals)
+        return Learned(predictor, deform=name != "template_only")
+    if name == "omnihang":
+        if omnihang is None:
+            raise ValueError("omnihang: needs (object points, settings, seed)")
+        return OmniHang(skt_frames(np.asarray(gt_positions, float))[0], *omnihang, len(gt_positions))
     if name in ("oracle", "oracle_floating"):
         return Oracle(gt_positions)
     if name == "kpam":

@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from skt_lib.config import LEVELS, ContactSimParams, SimEvalParams
+from skt_lib.errors import DataError
 from skt_lib.eval.methods import hand_of
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
@@ -89,6 +90,27 @@ def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_de
     return test, objs, missing
 
 
+def reference_points(root: Path, spacing: float = 0.004) -> np.ndarray:
+    """Surface samples ``(K, 3)`` of the reference object in its keypoint frame: the object
+    ``omnihang`` plans for (the SKT methods' one path per support serves every object; the
+    reference object is the one the ground-truth SKTs were threaded with)."""
+    from skt_lib.geometry.se3 import invert, transform_points
+    from skt_lib.planning.collision import surface_samples
+
+    mg = root / "mesh_gen"
+    objects = read_table(mg / "objects.parquet", OBJECTS)
+    ref = objects[objects["is_reference"]]
+    if len(ref) != 1:
+        raise DataError(f"{mg / 'objects.parquet'}: expected one reference object, found {len(ref)}")
+    kps = read_table(root / "rotation_extraction" / "keypoints.parquet", KEYPOINTS).set_index("object_id")
+    oid = ref["object_id"].iloc[0]
+    if oid not in kps.index:
+        raise DataError(f"{root / 'rotation_extraction'}: no keypoint for the reference {oid}")
+    (mesh,) = read_obj(mg / ref["mesh_path"].iloc[0])
+    k = pose_matrix(kps.loc[oid, "position"], kps.loc[oid, "quat"])
+    return transform_points(invert(k), surface_samples(mesh, spacing))
+
+
 def trial_settings(p: SimEvalParams, cs: ContactSimParams) -> TrialSettings:
     """Physics (time step, solver, friction, damping, perturbation and at-rest thresholds)
     shared with ``contact_sim``; robot, grasp and execution settings from ``sim_eval``."""
@@ -99,27 +121,62 @@ def trial_settings(p: SimEvalParams, cs: ContactSimParams) -> TrialSettings:
         p.grasp_force_n, p.retreat_m, p.retreat_steps, perturbation(cs))
 
 
-def predict_all(methods: dict, supports: list[TestSupport]) -> tuple[dict, dict]:
-    """``methods[name](support) -> Method``; returns ({(name, support_id): positions (T, 3)},
-    {name: [inference seconds per support]}), timed one support at a time (batch 1)."""
-    out, seconds = {}, {name: [] for name in methods}
+def predict_all(methods: dict, supports: list[TestSupport]) -> tuple[dict, dict, dict]:
+    """``methods[name](support) -> Method``; returns ({(name, support_id): [positions (T, 3),
+    …]}, {name: [inference seconds per support]}, {(name, support_id): method}), timed one
+    support at a time (batch 1). A proposing method (one with ``propose``) gives all its
+    proposals, timed together; any other method one SKT."""
+    out, seconds, made = {}, {name: [] for name in methods}, {}
     for s in supports:
         for name, make in methods.items():
             method = make(s)
             t0 = time.perf_counter()
-            skt = method.predict(s.cloud)
+            skts = method.propose(s.cloud) if hasattr(method, "propose") else [method.predict(s.cloud)]
             seconds[name].append(time.perf_counter() - t0)
-            out[name, s.support_id] = skt.positions
-    return out, seconds
+            out[name, s.support_id] = [skt.positions for skt in skts]
+            made[name, s.support_id] = method
+    return out, seconds, made
 
 
 def make_task(method: str, s: TestSupport, o: TestObject, positions: np.ndarray,
-              settings: TrialSettings, record_every: int = 0) -> TrialTask:
+              settings: TrialSettings, record_every: int = 0, proposal: int = 0) -> TrialTask:
+    """One trial; ``proposal`` > 0 for a proposing method's later proposals (their ids end in
+    ``/p<proposal>``)."""
+    tid = f"{method}/{s.support_id}/{o.object_id}" + (f"/p{proposal}" if proposal else "")
     return TrialTask(
-        f"{method}/{s.support_id}/{o.object_id}", method, s.support_id, o.object_id, s.urdf, o.urdf,
+        tid, method, s.support_id, o.object_id, s.urdf, o.urdf,
         tuple(o.keypoint.ravel()), o.grasps, o.radius_m,
         tuple(map(tuple, np.asarray(positions, float))), settings, record_every,
-        {"difficulty": s.difficulty, "category": o.category}, hand_of(method))
+        {"difficulty": s.difficulty, "category": o.category, "proposal": proposal}, hand_of(method))
+
+
+#: Suffix of the single-sample rows :func:`per_pair` adds for proposing methods.
+SINGLE = "@1"
+
+
+def per_pair(trials: pd.DataFrame) -> pd.DataFrame:
+    """One row per (method, support, object). A pair with several proposals (rows with
+    ``proposal`` > 0) succeeds if any proposal hung the object (the paper's best-of-N) and
+    keeps proposal 0's failure reason when none did; it also gets a row ``<method>@1`` with
+    proposal 0 alone (the honest single-sample rate). Row order: the table's, per method."""
+    first = trials[trials["proposal"] == 0]
+    multi = set(trials.loc[trials["proposal"] > 0, "method"])
+    if not multi:
+        return first.reset_index(drop=True)
+    key = ["method", "support_id", "object_id"]
+    anyok = trials.groupby(key, sort=False)["success"].any()
+    parts = []
+    for method, g in first.groupby("method", sort=False):
+        if method in multi:
+            best = g.copy()
+            best["success"] = anyok.loc[[tuple(r) for r in g[key].to_numpy()]].to_numpy()
+            best.loc[best["success"], "failure_reason"] = ""
+            single = g.copy()
+            single["method"] = method + SINGLE
+            parts += [best, single]
+        else:
+            parts.append(g)
+    return pd.concat(parts, ignore_index=True)
 
 
 def success_table(trials: pd.DataFrame) -> dict[str, dict[str, float | None]]:

@@ -1,0 +1,105 @@
+"""train_baselines — the learned baselines of Table I and Table II, trained with SCTDN's loop,
+data, validation split and budget (the ``train`` params), one seed.
+
+- ``sctdn_cp_feature``: SCTDN whose deformation is conditioned on the contact-point feature
+  instead of the shape-conditioned one (Table II, middle row);
+- ``vatmart``: affordance + CVAE on the contact-point feature, KL ``vatmart_kl_weight``;
+- ``vatmart_mod``: the same CVAE on the shape-conditioned feature, KL ``vatmart_mod_kl_weight``.
+
+Inputs:  as ``train``; params common.seed, train, train_baselines, sim_eval.n_proposals.
+Outputs: data/train_baselines/<model>/ (``sctdn.pt``+``sctdn.json`` or ``vatmart.pt``+
+         ``vatmart.json``); reports/train_baselines/{metrics.json, report.md, PNGs}.
+"""
+
+import logging
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from skt_lib.config import load_params
+from skt_lib.learning.data import load_training_set
+from skt_lib.learning.predictor import SktPredictor
+from skt_lib.learning.train import from_params, train_sctdn
+from skt_lib.learning.train_baselines import train_vatmart, vatmart_config
+from skt_lib.learning.vatmart import VatMartPredictor
+from stages._common import parse_args
+from viz.figures import curves
+from viz.report import Report, write_metrics
+
+log = logging.getLogger("train_baselines")
+
+
+def main(argv=None) -> int:
+    args = parse_args("train_baselines", argv)
+    params = load_params(args.params)
+    p, pb = params.train, params.train_baselines
+    root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
+    data = load_training_set(root)
+    train, val = data.train, data.val
+    cfg, settings = from_params(p, data.k, data.T, data.n_points)
+    n_prop = params.sim_eval.n_proposals
+    metrics, histories, walls = {}, {}, {}
+    for name in tqdm(pb.models, desc="baselines", unit="model"):
+        seed = params.common.seed  # SCTDN's: the same view order, the same initial backbone
+        history: list[dict] = []
+
+        def on_epoch(epoch, m, name=name, history=history):
+            history.append(m)
+            log.info("%s epoch %d: %s", name, epoch,
+                     {k2: v if v is None else round(v, 4) for k2, v in m.items()})
+
+        t0 = time.perf_counter()
+        if name == "sctdn_cp_feature":
+            model, best = train_sctdn(_replace(cfg, condition="contact_point"), data.templates,
+                                      train, val, settings, seed, on_epoch)
+            SktPredictor(model).save(out / name)
+        else:
+            vcfg = vatmart_config(name, cfg, pb)
+            model, best = train_vatmart(vcfg, train, val, settings, seed, n_prop, on_epoch)
+            VatMartPredictor(model).save(out / name)
+        walls[name] = time.perf_counter() - t0
+        curve = [h["val_traj_l2_mm"] for h in history]
+        metrics[name] = {**best, "best_epoch": int(np.argmin(curve)), "epochs": p.epochs}
+        histories[name] = history
+    write_metrics(rep, metrics)
+    _write_report(rep, metrics, histories, walls, len(train), len(val), p, n_prop)
+    return 0
+
+
+def _replace(cfg, **kw):
+    from dataclasses import replace
+
+    return replace(cfg, **kw)
+
+
+def _write_report(rep: Path, metrics: dict, histories: dict, walls: dict, n_train: int,
+                  n_val: int, p, n_prop: int) -> None:
+    report = Report("train_baselines", rep)
+    report.text(f"Learned baselines trained like SCTDN (`train`): {p.epochs} epochs × "
+                f"{p.views_per_epoch} views per training support ({n_train} supports), best epoch "
+                f"chosen on {n_val} validation supports × views {list(p.val_views)} "
+                "(never on training supports). Wall time: "
+                + ", ".join(f"{m} {w / 60:.1f} min" for m, w in walls.items()) + ".")
+    keys = sorted({k for m in metrics.values() for k in m if k.startswith("val_")})
+    report.table(["model", *keys, "best epoch"],
+                 [[m, *("–" if v.get(k) is None else v[k] for k in keys), v["best_epoch"]]
+                  for m, v in metrics.items()])
+    report.text("`val_traj_l2_mm`: mean waypoint distance (mm) of the prediction to the nearest "
+                "ground-truth SKT, contact from the predicted affordance; for the CVAEs it is "
+                f"one proposal (the first of {n_prop} fixed validation latents), "
+                f"`val_best_of_n_l2_mm` the best of the {n_prop} (the paper's best-of-10 "
+                "counts a trial as hung if any proposal hangs), `val_spread_mm` the mean "
+                "distance of the proposals from their mean (0: the latent is ignored).")
+    for m, h in histories.items():
+        curves(h, [k for k in ("val_traj_l2_mm", "val_best_of_n_l2_mm",
+                               "val_template_only_l2_mm") if k in h[0]],
+               report.figure(f"val_l2_{m}.png", f"{m}: validation waypoint error per epoch"),
+               m, "mm")
+    report.write()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
