@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: env repro test bench review mutation train-diagnostics clean-env
+.PHONY: env repro test bench review seeds mutation train-diagnostics clean-env
 
 env: $(STAMP)
 
@@ -59,6 +59,12 @@ mutation: $(STAMP)
 	@# tests; summary in reports/tests/mutation.{json,md}. Minutes per module; not in .ci/run.
 	@# One module: make mutation MODULES=skt_lib/planning/trajectory.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python tools/mutation.py $(MODULES)
+
+seeds: $(STAMP)
+	@# the learned methods retrained with two more training seeds on the committed data and
+	@# evaluated on the same trials: reports/seeds/{seeds.json,report.md}; needs `make repro`
+	@# (about 15 min a seed on 2 cores)
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python -m tools.seed_sweep
 
 train-diagnostics: $(STAMP)
 	@# short seeded SCTDN runs (overfit one batch, learning curve, contact term, train vs
