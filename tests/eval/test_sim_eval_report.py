@@ -4,6 +4,7 @@ import pandas as pd
 import pytest
 
 from skt_lib.config import LEVELS
+from skt_lib.eval.orderings import check_orderings
 from skt_lib.eval.protocol import success_table
 from skt_lib.eval.stats import paired_comparisons, success_ci95
 from skt_lib.sim.execute import REASONS
@@ -34,6 +35,7 @@ def _metrics(trials):
                                             (trials["failure_reason"] == r)).sum())
                                     for r in REASONS}} for k in METHODS}
     m["paired"] = paired_comparisons(trials, "sctdn")
+    m["paper_orderings"] = check_orderings(trials)
     return m
 
 
@@ -43,7 +45,8 @@ def test_report_shows_intervals_and_paired_verdicts(tmp_path):
     assert set(metrics["paired"]) == {"sctdn_vs_oracle_floating", "sctdn_vs_template_only",
                                       "sctdn_vs_kpam"}
     assert metrics["sctdn"]["success_ci95"]["hard"] is None  # no hard supports here
-    _write_report(tmp_path, trials, metrics, METHODS, [None] * 8, [None] * 5, [], 60.0, [])
+    _write_report(tmp_path, trials, trials, metrics, METHODS, [None] * 8, [None] * 5, [], 60.0,
+                  [])
     text = (tmp_path / "report.md").read_text()
     # Table I: sctdn 36/40 = 90.0 %, Wilson [76.9–96.0]
     lo, hi = metrics["sctdn"]["success_ci95"]["all"]
@@ -61,3 +64,6 @@ def test_report_shows_intervals_and_paired_verdicts(tmp_path):
     assert row.endswith("| no significant difference |")
     row = next(line for line in text.splitlines() if line.startswith("| sctdn vs template_only"))
     assert row.endswith("| sctdn better |")
+    # the one paper ordering both methods of which ran: sctdn (90 %) ≥ template_only (50 %) + 10
+    row = next(line for line in text.splitlines() if line.startswith("| sctdn ≥ template_only"))
+    assert row.startswith("| sctdn ≥ template_only + 10 points (all levels) | 90.0 | 50.0 | yes |")

@@ -28,27 +28,31 @@ def test_train_contract_and_predictor(tiny_dataset):
     assert np.linalg.norm(cloud - skt.positions[0], axis=1).min() < 0.05
 
 
-def test_train_refuses_to_select_on_training_supports(monkeypatch, tmp_path):
+@pytest.mark.parametrize("name", ["train", "train_baselines"])
+def test_training_refuses_to_select_on_training_supports(name, monkeypatch, tmp_path):
     """No validation split → a clear DataError, never figures labelled val_* from train."""
+    import importlib
     from types import SimpleNamespace
 
     from skt_lib.errors import DataError
+    from skt_lib.learning import data
     from skt_lib.learning.data import SupportData
-    from stages import train as stage
 
+    stage = importlib.import_module(f"stages.{name}")
     sup = [SupportData(f"s{i}", "train", 0, np.zeros((2, 16, 3), np.float32),
                        np.zeros((2, 16), np.float32), np.zeros((1, 10, 3)), np.zeros(3),
                        np.ones((2, 16), np.float32), np.ones(2, bool))
            for i in range(3)]
     monkeypatch.setattr(stage, "load_params", lambda _: SimpleNamespace(
-        train=SimpleNamespace(), common=SimpleNamespace(seed=0)))
-    monkeypatch.setattr(stage, "read_npz", lambda *a: {"templates": np.zeros((1, 10, 3)),
-                                                        "T": 10, "k": 1})
-    monkeypatch.setattr(stage, "load_supports", lambda *a: sup)
+        train=SimpleNamespace(), train_baselines=SimpleNamespace(), common=SimpleNamespace(seed=0)))
+    monkeypatch.setattr(data, "read_npz", lambda *a: {"templates": np.zeros((1, 10, 3)),
+                                                      "T": 10, "k": 1})
+    monkeypatch.setattr(data, "load_supports", lambda *a: sup)
     monkeypatch.setattr(stage, "train_sctdn", lambda *a: pytest.fail("trained without val"))
     with pytest.raises(DataError, match="0 validation supports.*n_val_per_level"):
         stage.main(["--data-root", str(tmp_path), "--data-dir", str(tmp_path / "o"),
                     "--reports-dir", str(tmp_path / "r")])
+    assert not (tmp_path / "o").exists() and not (tmp_path / "r").exists()
 
 
 def test_train_report_units():
