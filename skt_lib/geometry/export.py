@@ -60,10 +60,22 @@ def mass_properties(mesh: Mesh, density: float) -> tuple[float, np.ndarray, np.n
     return float(tm.mass), np.asarray(tm.center_mass), np.asarray(tm.moment_inertia)
 
 
+#: Absolute resolution of the centre of mass (m) and inertia (kg m²) written in URDFs: far
+#: below anything that matters physically, far above summation-order noise (a symmetric
+#: object's zero off-diagonal inertia, ~1e-23, would otherwise be written as that noise).
+_COM_STEPS_PER_M = 1e12  # 1e-12 m
+_INERTIA_STEPS_PER_UNIT = 1e15  # 1e-15 kg m²
+
+
+def _quantise(x, per_unit: float) -> np.ndarray:
+    return np.rint(np.asarray(x, dtype=np.float64) * per_unit) / per_unit + 0.0  # no -0.0
+
+
 def urdf_text(name: str, visual: str, collision: str, mass: float, com, inertia, rgba) -> str:
     """A one-link URDF. ``mass == 0`` makes the body static in PyBullet."""
     f = lambda x: f"{x:.9g}"  # noqa: E731
-    i = np.asarray(inertia)
+    com = _quantise(com, _COM_STEPS_PER_M)
+    i = _quantise(inertia, _INERTIA_STEPS_PER_UNIT)
     return f"""<?xml version="1.0"?>
 <robot name="{name}">
   <link name="base">

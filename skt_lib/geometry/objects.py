@@ -14,7 +14,7 @@ from scipy.spatial import ConvexHull
 
 from skt_lib.config import MeshGenParams
 from skt_lib.errors import GenerationFailed
-from skt_lib.geometry.convex import Mesh, box, hull, prism, sphere, tube
+from skt_lib.geometry.convex import Mesh, box, hull, prism, rownorm3, sphere, tube
 
 _RING_SEGMENTS = 16
 
@@ -55,7 +55,8 @@ def aperture_clearance(parts: tuple[Mesh, ...] | list[Mesh]) -> float:
         a, b = poly, np.roll(poly, -1, axis=0)
         ab = b - a
         t = np.clip(-(a * ab).sum(1) / (ab * ab).sum(1), 0.0, 1.0)
-        best = min(best, float(np.linalg.norm(a + t[:, None] * ab, axis=1).min()))
+        d = a + t[:, None] * ab
+        best = min(best, float(np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]).min()))
     return best
 
 
@@ -98,7 +99,7 @@ def _scissor(rng, rod):
         ym = y2 / 2 + dy
         pts = [[sx * 0.002, y, base_z + sz] for sx in (-1, 1) for y in (0.0, y2) for sz in (0, -0.01)]
         pts += [[sx * 0.0015, ym, base_z - blade_len] for sx in (-1, 1)]
-        parts.append(hull(np.array(pts)))
+        parts.append(hull(np.array(pts), snap_to_grid=True))
     return ObjectShape("scissor", "ring", tuple(parts))
 
 
@@ -122,9 +123,9 @@ def _other(rng, rod):
     neck = box([0, 0, top - neck_len / 2], [0.004, 0.006, neck_len / 2])
     radii = np.array([_u(rng, 0.015, 0.04), _u(rng, 0.02, 0.05), _u(rng, 0.02, 0.05)])
     dirs = rng.normal(size=(16, 3))
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    dirs /= rownorm3(dirs)[:, None]
     center = np.array([0.0, 0.0, top - neck_len - radii[2] + 0.004])
-    body = hull(center + dirs * radii)
+    body = hull(center + dirs * radii, snap_to_grid=True)
     return ObjectShape("other", "loop", (*ring(a, b, w, False), neck, body))
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from skt_lib.config import LEVELS, MeshGenParams
 from skt_lib.errors import GenerationFailed
-from skt_lib.geometry.convex import Mesh, box, sphere, tube
+from skt_lib.geometry.convex import Mesh, box, norm3, rowdot3, rownorm3, sphere, tube
 
 PLATE_THICKNESS_M = 0.01
 #: The hang point is searched at least this far from the wall, so a hung object clears it.
@@ -238,7 +238,7 @@ class Difficulty:
 def _densify(points: np.ndarray, step: float = 0.001) -> np.ndarray:
     out = [points[:1]]
     for a, b in zip(points[:-1], points[1:]):
-        n = max(1, math.ceil(np.linalg.norm(b - a) / step))
+        n = max(1, math.ceil(norm3(b - a) / step))
         out.append(a + (b - a) * (np.arange(1, n + 1)[:, None] / n))
     return np.vstack(out)
 
@@ -248,7 +248,7 @@ def measure_difficulty(shape: SupportShape, p: MeshGenParams) -> Difficulty:
     arm = shape.strokes[0]
     pts = _densify(arm.points)
     seg = np.diff(pts, axis=0)
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(seg, axis=1))])
+    s = np.concatenate([[0.0], np.cumsum(rownorm3(seg))])
     z_top = pts[:, 2] + arm.radius
     cand = np.flatnonzero(pts[:, 0] >= HANG_MIN_X_M)
     if len(cand) == 0:
@@ -257,21 +257,25 @@ def measure_difficulty(shape: SupportShape, p: MeshGenParams) -> Difficulty:
     # end of that stretch (where a J/L bend starts), not its wall end.
     i = int(cand[np.argmin(z_top[cand])])
     zmin = z_top[i]
-    while i + 1 < len(seg) and z_top[i + 1] <= zmin + 1e-4 and abs(seg[i][2]) < 0.035 * np.linalg.norm(seg[i]):
+    while (i + 1 < len(seg) and z_top[i + 1] <= zmin + 1e-4
+           and abs(seg[i][2]) < 0.035 * norm3(seg[i])):
         i += 1
     if i == len(pts) - 1:
         raise GenerationFailed("hang point at the very tip: objects would slide off", "slides_off")
     c = pts[i]
     t = seg[i - 1] if i > 0 else seg[i]  # arriving direction: the arm's, at a bend
-    t = t / np.linalg.norm(t)
+    # no BLAS (``@``, ``np.dot``, vector ``np.linalg.norm``) and no numpy SIMD arccos here:
+    # both round differently per CPU, and these numbers are recorded (see convex.py)
+    t = t / norm3(t)
     n = np.array([-t[2], 0.0, t[0]])
-    n /= np.linalg.norm(n)
-    heights = [float(((pts[i + 1 :] - c) @ n).max())]
-    heights += [float((np.asarray(k) - c) @ n) + rk - arm.radius for k, rk in shape.knobs]
+    n /= norm3(n)
+    heights = [float(rowdot3(pts[i + 1 :] - c, n).max())]
+    heights += [float(rowdot3(np.asarray(k) - c, n)) + rk - arm.radius for k, rk in shape.knobs]
     blocking = max(0.0, *heights)
 
-    dirs = np.vstack([t, seg[i:] / np.linalg.norm(seg[i:], axis=1, keepdims=True)])
-    turn = float(np.degrees(np.arccos(np.clip((dirs[:-1] * dirs[1:]).sum(1), -1, 1))).sum())
+    dirs = np.vstack([t, seg[i:] / rownorm3(seg[i:])[:, None]])
+    cos = np.clip(rowdot3(dirs[:-1] * dirs[1:], (1.0, 1.0, 1.0)), -1, 1)
+    turn = math.degrees(math.fsum(math.acos(x) for x in cos.tolist()))
 
     # clearance: free space between the arm from the hang point to its tip and any other
     # structure above the arm line and not behind the hang point
@@ -282,10 +286,10 @@ def measure_difficulty(shape: SupportShape, p: MeshGenParams) -> Difficulty:
     for q, rq in others:
         if len(q) == 0:
             continue
-        a, b = (q - c) @ t, (q - c) @ n
+        a, b = rowdot3(q - c, t), rowdot3(q - c, n)
         q = q[(a >= -0.01) & (b > arm.radius + rq)]
         if len(q):
-            gap = np.linalg.norm(q[:, None] - beyond[None], axis=2).min() - rq - arm.radius
+            gap = rownorm3(q[:, None] - beyond[None]).min() - rq - arm.radius
             clearance = min(clearance, float(gap))
 
     level = int(np.searchsorted(np.asarray(p.level_rise_m), blocking, side="right"))
