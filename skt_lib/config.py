@@ -141,15 +141,15 @@ class RrtSktsParams(_Section):
     start_dz_m: tuple[float, float] = Field(description="Start keypoint offset range upward.")
     step_m: float = Field(gt=0.001, le=0.05, description="Tree edge length of the threading planner.")
     max_turn_deg: float = Field(gt=0.0, le=90.0, description="Largest turn of the motion direction per edge.")
-    max_pitch_deg: float = Field(gt=0.0, lt=90.0, description="Largest angle of motion from horizontal.")
     lead_in_m: float = Field(gt=0.0, le=0.1, description="Straight final approach along the hanging keypoint's x.")
-    max_setback_m: float = Field(ge=0.0, le=0.1, description="How far short of the hang, back along the approach, ξ_0 may stop.")
-    max_lift_m: float = Field(ge=0.0, le=0.05, description="How far above the hang ξ_0 may be lifted (the object drops in).")
+    max_lift_m: float = Field(ge=0.0, le=0.004, description="How far above the hang ξ_0 may be lifted (the object drops in); ≤ 4 mm, so every SKT ends within 5 mm of the hang.")
     check_step_m: float = Field(gt=0.0, le=0.01, description="Largest probe-point motion between checked poses.")
     clearance_m: float = Field(ge=0.0, le=0.01, description="PyBullet distance the reference object keeps from support and wall.")
     probe_train_objects: bool = Field(description="Plan with the training objects beside the reference (see README).")
     penetration_tol_m: float = Field(ge=0.0, le=0.01, description="Deepest penetration allowed to a training object.")
     goal_bias: float = Field(gt=0.0, lt=1.0, description="Share of tree samples drawn in the start region.")
+    surface_bias: float = Field(ge=0.0, lt=1.0, description="Share of tree samples drawn near the support's surface.")
+    surface_offset_m: float = Field(gt=0.0, le=0.05, description="Largest offset of those samples from the surface, along its normal.")
     max_checks: int = Field(ge=100, le=10_000_000, description="Planning budget per SKT, in pose checks.")
     shortcut_steps: int = Field(ge=0, le=100000, description="Shortcut attempts on a found path.")
     dense_step_m: float = Field(gt=0.0, le=0.001, description="Spacing of stored keypoint positions (≤ 1 mm).")
@@ -162,6 +162,8 @@ class RrtSktsParams(_Section):
         _check_range("start_dz_m", self.start_dz_m)
         if self.start_dx_m[0] <= 0:
             raise ValueError("start_dx_m: starts must lie in front of the hang (> 0)")
+        if self.goal_bias + self.surface_bias >= 1.0:
+            raise ValueError("surface_bias: goal_bias + surface_bias must be < 1")
         if self.dense_step_m > self.step_m:
             raise ValueError("dense_step_m: must not exceed step_m")
         return self
@@ -248,6 +250,10 @@ class SimEvalParams(_Section):
     n_proposals: int = Field(ge=1, le=100, description="VAT-Mart methods: proposals per support; a (support, object) trial succeeds if any proposal hangs (the paper's count); success_single counts the first proposal only.")
     omnihang_time_limit_s: float = Field(gt=0.0, le=600.0, description="omnihang: RRT-Connect time limit per support (a failed plan falls back to the straight approach).")
     robot_base_m: tuple[float, float, float] = Field(description="World position of the Panda base, m.")
+    linear_damping: float = Field(ge=0.0, le=10.0, description="Object linear damping (1/s) while carried, released and perturbed; PyBullet's default 0.04, as the anchors' (DESIGN §5).")
+    angular_damping: float = Field(ge=0.0, le=10.0, description="Object angular damping (1/s) while carried, released and perturbed; PyBullet's default 0.04.")
+    settle_linear_damping: float = Field(ge=0.0, le=10.0, description="Object linear damping during the final settle only (an undamped hung object keeps swinging).")
+    settle_angular_damping: float = Field(ge=0.0, le=10.0, description="Object angular damping during the final settle only.")
     grasp_pitch_deg: tuple[float, ...] = Field(
         min_length=1, description="Grasp candidates: approach axis pitched down from keypoint +x, degrees, tried in this order.")
     grasp_rolls_deg: tuple[float, ...] = Field(

@@ -32,13 +32,14 @@ TINY = {
     "sim_eval": {"methods": ["oracle", "oracle_floating", "template_only", "sctdn", "kpam",
                              "vatmart", "omnihang"],
                  "n_proposals": 3, "omnihang_time_limit_s": 5.0,
-                 "robot_base_m": [0.15, 0.0, 0.3], "grasp_pitch_deg": [45.0, 30.0, 60.0],
+                 "robot_base_m": [0.15, 0.0, 0.3], "linear_damping": 0.04, "angular_damping": 0.04,
+                 "settle_linear_damping": 1.0, "settle_angular_damping": 5.0, "grasp_pitch_deg": [45.0, 30.0, 60.0],
                  "grasp_rolls_deg": [0.0, 180.0], "setup_clearance_m": 0.002, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,
                  "track_tol_m": 0.02, "ik_tol_m": 0.002, "ik_tol_rad": 0.02, "max_joint_step_rad": 0.2,
                  "ik_restarts": 4, "grasp_force_n": 60.0, "retreat_m": 0.08, "retreat_steps": 60,
                  "kpam_pre_hang_m": [0.1, 0.0, 0.0], "kpam_lift_m": 0.01,
                  "n_record": 1, "record_every": 16},
-    "rrt_skts": {'n_skts_per_support': 1, 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'step_m': 0.01, 'max_turn_deg': 35.0, 'max_pitch_deg': 75.0, 'lead_in_m': 0.01, 'max_setback_m': 0.04, 'max_lift_m': 0.02, 'check_step_m': 0.0025, 'clearance_m': 0.0005, 'probe_train_objects': False, 'penetration_tol_m': 0.005, 'goal_bias': 0.2, 'max_checks': 15000, 'shortcut_steps': 10, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
+    "rrt_skts": {'n_skts_per_support': 1, 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'step_m': 0.01, 'max_turn_deg': 35.0, 'lead_in_m': 0.01, 'max_lift_m': 0.004, 'check_step_m': 0.0025, 'clearance_m': 0.0005, 'probe_train_objects': False, 'penetration_tol_m': 0.005, 'goal_bias': 0.2, 'surface_bias': 0.2, 'surface_offset_m': 0.015, 'max_checks': 15000, 'shortcut_steps': 10, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
 }
 
 

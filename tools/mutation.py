@@ -15,7 +15,7 @@ equivalent (``EQUIVALENT`` below; listed with the reason in ``reports/tests/muta
 minutes per module.
 
     python tools/mutation.py                      # every module
-    python tools/mutation.py skt_lib/planning/trajectory.py --max-children 2
+    python tools/mutation.py skt_lib/geometry/skt.py --max-children 2
 """
 
 import argparse
@@ -38,7 +38,7 @@ MODULES: dict[str, list[str]] = {
     "skt_lib/sim/execute.py": ["tests/sim/test_execute.py"],
     "skt_lib/planning/collision.py": ["tests/planning/test_collision.py",
                                       "tests/planning/test_planning.py"],
-    "skt_lib/planning/trajectory.py": ["tests/planning/test_trajectory.py",
+    "skt_lib/geometry/skt.py": ["tests/planning/test_trajectory.py",
                                        "tests/planning/test_planning.py"],
     "skt_lib/learning/pointnet2.py": ["tests/learning/test_pointnet2.py"],
 }
@@ -47,21 +47,21 @@ MODULES: dict[str, list[str]] = {
 #: Names are mutmut's (``module.x_function__mutmut_N``); re-check them when the module
 #: changes, as mutant numbering follows the source.
 EQUIVALENT: dict[str, str] = {
-    "skt_lib.planning.trajectory.x_keypoint_positions__mutmut_11":
+    "skt_lib.geometry.skt.x_keypoint_positions__mutmut_11":
         'einsum subscripts "nij,j->ni" → "NIJ,J->NI": the same contraction under renamed '
         "indices.",
-    "skt_lib.planning.trajectory.x_executed_path__mutmut_9":
+    "skt_lib.geometry.skt.x_executed_path__mutmut_9":
         "np.asarray(positions, float) → np.asarray(positions, None): positions only flow into "
         "skt_frames, which converts to float64 itself (a float32 input is tested there).",
-    "skt_lib.planning.trajectory.x_executed_path__mutmut_11":
+    "skt_lib.geometry.skt.x_executed_path__mutmut_11":
         "np.asarray(positions, float) → np.asarray(positions): as mutant 9.",
-    **{f"skt_lib.planning.trajectory.x_skt_frames__mutmut_{i}":
+    **{f"skt_lib.geometry.skt.x_skt_frames__mutmut_{i}":
        "np.errstate argument dropped/None: only whether numpy warns on 0/0 for a zero or "
        "vertical segment changes; those rows are masked out by `known` either way."
        for i in (15, 16, 17, 18)},
-    "skt_lib.planning.trajectory.x_skt_frames__mutmut_47":
+    "skt_lib.geometry.skt.x_skt_frames__mutmut_47":
         "norm >= 1e-12 → > 1e-12: differs only for a segment of length exactly 1e-12 m.",
-    "skt_lib.planning.trajectory.x_skt_frames__mutmut_50":
+    "skt_lib.geometry.skt.x_skt_frames__mutmut_50":
         "y_norm >= 1e-6 → > 1e-6: differs only at exactly 1e-6 horizontal share (as the "
         "scalar skt_rotation's threshold).",
     "skt_lib.learning.pointnet2.x_fps__mutmut_2":

@@ -23,7 +23,7 @@ import rerun.blueprint as rrb
 import trimesh
 
 from skt_lib.geometry.se3 import pose_matrix
-from skt_lib.planning.trajectory import resample, skt_frames
+from skt_lib.geometry.skt import resample, skt_frames
 from skt_lib.sim.robot import Panda
 from skt_lib.sim.world import World
 from viz.rerun_log import (METHOD_RGB, SKT_EYE, SKT_LOOK_AT, ItemTimeline, item_blueprint,

@@ -14,7 +14,7 @@ from skt_lib.geometry.se3 import pose_matrix
 from skt_lib.io import read_table
 from skt_lib.perception.render import DepthRenderer
 from skt_lib.perception.views import render_view, support_cameras
-from skt_lib.planning.trajectory import resample
+from skt_lib.geometry.skt import resample
 from skt_lib.schemas import KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from skt_lib.sim.grasp import grasp_candidates

@@ -26,7 +26,7 @@ from typing import Protocol
 import numpy as np
 
 from skt_lib.learning.predictor import Skt, SktPredictor
-from skt_lib.planning.trajectory import skt_frames
+from skt_lib.geometry.skt import skt_frames
 
 #: Methods that need a trained model: SktPredictor ones, then the VAT-Mart proposers.
 LEARNED = ("template_only", "sctdn", "sctdn_cp_feature")

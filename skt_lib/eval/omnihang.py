@@ -8,11 +8,11 @@ positions in the support frame, ξ_0 = release at the hang first, ξ_{T-1} = sta
 - **Search space.** Keypoint *positions* in R^3 (``RealVectorStateSpace(3)``), bounded by the
   cloud's bounding box ∪ start ∪ goal grown by :data:`BOUNDS_MARGIN_M`, clipped to the free
   side of the wall (x ≥ 0). At every state the object keeps its hanging orientation
-  (``hang[:3, :3]``). Execution uses the SKT rule's frames instead
-  (:func:`skt_lib.planning.trajectory.executed_path`: x follows the motion), which differ from
+  (``hang[:3, :3]``). Execution uses the SKT frames instead
+  (:func:`skt_lib.geometry.skt.executed_path`: x follows the motion), which differ from
   the planned orientation where the path turns; the last ``lead_in_m`` is a straight line along
-  the hanging frame's x axis, which is exactly the direction the rule needs for the object to
-  arrive at its hanging orientation, so the end of the path agrees with execution.
+  the hanging frame's x axis, whose rule frame anchors the SKT frames, so the object comes to
+  its hanging orientation: the end of the path agrees with execution.
 - **Collision check.** :class:`CloudClearance`: the least distance from the object's surface
   samples (placed at the keypoint pose) to the observed cloud points (a k-d tree) and to the
   wall plane x = 0; a state is valid when that distance is at least ``clearance_m``.
@@ -30,7 +30,7 @@ positions in the support frame, ξ_0 = release at the hang first, ξ_{T-1} = sta
 - **Post-processing.** Seeded random shortcutting (a :class:`numpy.random.Generator` from
   ``seed``, a fixed number of attempts, each checked densely) of the RRT part — *not* OMPL's
   time-limited simplifiers, whose output depends on machine speed — then arc-length
-  resampling to ``T`` waypoints (:func:`skt_lib.planning.trajectory.resample`), reversed to
+  resampling to ``T`` waypoints (:func:`skt_lib.geometry.skt.resample`), reversed to
   ξ_0-first order.
 - **Determinism.** RRT-Connect's samples come from OMPL's process-global seed generator,
   which is re-seeded from ``seed`` right before the planner is built (OMPL logs an error that
@@ -61,7 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from skt_lib.planning.trajectory import arc_length, resample
+from skt_lib.geometry.skt import arc_length, resample
 
 log = logging.getLogger(__name__)
 

@@ -21,7 +21,7 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
 from skt_lib.io import read_npz, read_table
 from skt_lib.perception.views import RENDER_SPEC
-from skt_lib.planning.trajectory import resample
+from skt_lib.geometry.skt import resample
 from skt_lib.schemas import KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from skt_lib.sim.contact_sim import perturbation
@@ -112,11 +112,12 @@ def reference_points(root: Path, spacing: float = 0.004) -> np.ndarray:
 
 
 def trial_settings(p: SimEvalParams, cs: ContactSimParams) -> TrialSettings:
-    """Physics (time step, solver, friction, damping, perturbation and at-rest thresholds)
-    shared with ``contact_sim``; robot, grasp and execution settings from ``sim_eval``."""
+    """Physics (time step, solver, friction, perturbation and at-rest thresholds) shared with
+    ``contact_sim``; the object's damping, robot, grasp and execution settings from
+    ``sim_eval``."""
     return TrialSettings(
-        cs.dt, cs.solver_iterations, cs.friction, cs.linear_damping, cs.angular_damping,
-        tuple(p.robot_base_m), p.step_m, p.steps_per_command, p.hold_steps, p.track_tol_m,
+        cs.dt, cs.solver_iterations, cs.friction, p.linear_damping, p.angular_damping,
+        p.settle_linear_damping, p.settle_angular_damping, tuple(p.robot_base_m), p.step_m, p.steps_per_command, p.hold_steps, p.track_tol_m,
         p.ik_tol_m, p.ik_tol_rad, p.max_joint_step_rad, p.ik_restarts, p.setup_clearance_m,
         p.grasp_force_n, p.retreat_m, p.retreat_steps, perturbation(cs))
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from skt_lib.labels.templates import Pca, fit_pca, kmeans, silhouette
-from skt_lib.planning.trajectory import resample
+from skt_lib.geometry.skt import resample
 
 
 def skt_features(keypoints: np.ndarray, T: int) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 from skt_lib.errors import DataError
 from skt_lib.io import read_npz, read_table
 from skt_lib.perception.views import RENDER_SPEC
-from skt_lib.planning.trajectory import resample
+from skt_lib.geometry.skt import resample
 from skt_lib.schemas import CONTACTS, LABELS, SKTS
 
 AFF_SPEC = {"affordance": ("float32", 2), "contact_map": ("float32", 2), "contact_visible": ("bool", 1)}

@@ -20,13 +20,13 @@ from skt_lib.errors import DataError
 from skt_lib.learning.data import normalise
 from skt_lib.learning.sctdn import Sctdn, SctdnConfig
 from skt_lib.perception.pointcloud import check_cloud, farthest_point_sample
-from skt_lib.planning.trajectory import skt_frames
+from skt_lib.geometry.skt import skt_frames
 
 
 @dataclass(frozen=True, eq=False)
 class Skt:
     positions: np.ndarray  # (T, 3) support frame, ξ_0 (hang) first
-    frames: np.ndarray  # (T, 4, 4) SE(3) waypoints by the SKT rule
+    frames: np.ndarray  # (T, 4, 4) SE(3) waypoints, SKT frames (skt_lib.geometry.skt)
     family: int
     contact: np.ndarray  # (3,) predicted contact point
     affordance: np.ndarray  # (N,) per input point (after resampling to n_points)

@@ -50,7 +50,7 @@ from skt_lib.learning.sctdn import (
     masked_max_pool,
 )
 from skt_lib.perception.pointcloud import check_cloud, farthest_point_sample
-from skt_lib.planning.trajectory import skt_frames
+from skt_lib.geometry.skt import skt_frames
 
 
 @dataclass(frozen=True)

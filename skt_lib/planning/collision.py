@@ -42,19 +42,25 @@ class MeshClearance:
         self._object = _Exact(_scene(obj), cKDTree(self._obj_pts), spacing)
         self._obj_radius = float(np.linalg.norm(obj.vertices, axis=1).max())
 
-    def clearance(self, poses: np.ndarray) -> float:
+    def clearance(self, poses: np.ndarray, chunk: int = 128) -> float:
         """Minimum signed distance (m) over all ``poses (N, 4, 4)``, both sample sets and the
-        wall plane, capped at 6 mm (farther is reported as 6 mm); < 0 means a collision."""
+        wall plane, capped at 6 mm (farther is reported as 6 mm); < 0 means a collision.
+        Poses are taken ``chunk`` at a time (memory stays bounded on long sweeps)."""
         poses = np.asarray(poses).reshape(-1, 4, 4)
-        obj = np.einsum("nij,kj->nki", poses[:, :3, :3], self._obj_pts) + poses[:, None, :3, 3]
-        obj = obj.reshape(-1, 3)
-        best = min(float(obj[:, 0].min()), self._support.signed_min(obj))
-        near = np.linalg.norm(self._sup_pts[None] - poses[:, None, :3, 3], axis=2) < self._obj_radius + 0.005
-        if near.any():
-            n_idx, k_idx = np.nonzero(near)
-            inv_r = np.transpose(poses[n_idx, :3, :3], (0, 2, 1))
-            local = np.einsum("nij,nj->ni", inv_r, self._sup_pts[k_idx] - poses[n_idx, :3, 3])
-            best = min(best, self._object.signed_min(local))
+        best = np.inf
+        for lo in range(0, len(poses), chunk):
+            part = poses[lo:lo + chunk]
+            obj = np.einsum("nij,kj->nki", part[:, :3, :3], self._obj_pts) + part[:, None, :3, 3]
+            obj = obj.reshape(-1, 3)
+            best = min(best, float(obj[:, 0].min()), self._support.signed_min(obj))
+            near = self._support.samples.query_ball_point(part[:, :3, 3], self._obj_radius + 0.005)
+            counts = np.fromiter((len(k) for k in near), int, len(near))
+            if counts.sum():
+                n_idx = np.repeat(np.arange(len(part)), counts)
+                k_idx = np.concatenate([np.asarray(k, int) for k in near])
+                inv_r = np.transpose(part[n_idx, :3, :3], (0, 2, 1))
+                local = np.einsum("nij,nj->ni", inv_r, self._sup_pts[k_idx] - part[n_idx, :3, 3])
+                best = min(best, self._object.signed_min(local))
         return best
 
 
@@ -71,9 +77,14 @@ class _Exact:
         ``shell`` from the surface and, as every part of a penetrating body that crosses the
         surface has samples that close to it, cannot hide a collision: they only bound the
         result from below. The rest get an exact distance and a ray-parity inside test."""
-        near, _ = self.samples.query(points, distance_upper_bound=self.shell + self.spacing)
-        close = np.isfinite(near)
-        if not close.any():
+        reach = self.shell + self.spacing
+        lo, hi = self.samples.mins - reach, self.samples.maxes + reach
+        boxed = np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1))  # cheap pre-filter
+        if not len(boxed):
+            return self.shell
+        near, _ = self.samples.query(points[boxed], distance_upper_bound=reach)
+        close = boxed[np.isfinite(near)]
+        if not len(close):
             return self.shell
         pts = o3d.core.Tensor(points[close].astype(np.float32))
         d = self.scene.compute_distance(pts).numpy()

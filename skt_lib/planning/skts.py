@@ -7,8 +7,9 @@ Start region (support frame, relative to the hanging keypoint ``k``): keypoint a
 in front of the support (toward the robot) and above it; the path is extended to the
 region's centre (the canonical start) where it can be, so that a support's SKTs are
 comparable as whole paths and their family is decided by the support, not by a random start.
-The orientation along the path is the SKT rule's (it follows the motion), so no start
-orientation is drawn.
+The orientation along the path is the SKT frames' (it follows the motion, its roll carried
+from the hanging orientation), so no start orientation is drawn. Every SKT ends at the hang
+(ξ_0 at most ``max_lift_m`` above it): :data:`REACH_TOL_M` is the contract's tolerance.
 
 Objects: the reference object and every *training* object (``objects.parquet`` split) take
 part in making labels; *test* objects never do — they are only swept along the stored SKT
@@ -30,12 +31,14 @@ from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
 from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn
 from skt_lib.planning.threading import ThreadingFailed, ThreadSettings, densify, plan_threading
-from skt_lib.planning.trajectory import executed_path, resample
+from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from skt_lib.sim.world import World
 
 BOUNDS_MARGIN_M = 0.08
+#: An SKT "reaches the hang" when its ξ_0 lies within this of the reference hang keypoint.
+REACH_TOL_M = 0.005
 
 
 @dataclass(frozen=True)
@@ -97,9 +100,31 @@ def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams, T: int) -> list[SktT
 
 
 def thread_settings(p: RrtSktsParams, probe_radius: float, T: int) -> ThreadSettings:
-    return ThreadSettings(p.step_m, p.max_turn_deg, p.max_pitch_deg, p.lead_in_m, p.max_setback_m,
-                          p.max_lift_m, p.check_step_m,
-                          probe_radius, p.goal_bias, p.max_checks, p.shortcut_steps, T)
+    return ThreadSettings(p.step_m, p.max_turn_deg, p.lead_in_m, p.max_lift_m, p.check_step_m,
+                          probe_radius, p.goal_bias, p.surface_bias, p.max_checks,
+                          p.shortcut_steps, T)
+
+
+def surface_sampler(mesh, max_offset_m: float):
+    """``sample(rng) -> (3,)``: a point on ``mesh`` (vertices, faces; area-weighted), moved
+    out along its face normal by a distance uniform in ``[0, max_offset_m]`` — where a keypoint
+    threaded on the support lies. Computed from the mesh alone, so imported meshes get the
+    same bias."""
+    tri = np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = np.linalg.norm(cross, axis=1)
+    cum = np.cumsum(area)
+    normals = cross / np.maximum(area, 1e-30)[:, None]
+
+    def sample(rng: np.random.Generator) -> np.ndarray:
+        f = min(int(np.searchsorted(cum, rng.random() * cum[-1], side="right")), len(tri) - 1)
+        a, b = rng.random(2)
+        if a + b > 1.0:
+            a, b = 1.0 - a, 1.0 - b
+        p = tri[f, 0] + a * (tri[f, 1] - tri[f, 0]) + b * (tri[f, 2] - tri[f, 0])
+        return p + normals[f] * rng.uniform(0.0, max_offset_m)
+
+    return sample
 
 
 def _kp(o: SktObject) -> np.ndarray:
@@ -135,6 +160,7 @@ def plan_support_skts(task: SktTask) -> dict:
     lower, upper = corners.min(0) - BOUNDS_MARGIN_M, corners.max(0) + BOUNDS_MARGIN_M
     lower[0] = max(lower[0], 0.0)
     settings = thread_settings(p, radius, task.T)
+    near = surface_sampler(support_mesh, p.surface_offset_m)
 
     def in_start(q: np.ndarray) -> bool:
         return bool(np.all(q - k_goal >= lo_off) and np.all(q - k_goal <= hi_off))
@@ -153,7 +179,8 @@ def plan_support_skts(task: SktTask) -> dict:
             t0 = time.perf_counter()
             try:
                 path, n_checks = plan_threading(goal, in_start, sample_start, lower, upper, collides,
-                                                 settings, rng, k_goal + (lo_off + hi_off) / 2)
+                                                 settings, rng, k_goal + (lo_off + hi_off) / 2,
+                                                 near)
             except ThreadingFailed as err:
                 plan_s.append(time.perf_counter() - t0)
                 failures[err.reason] += 1

@@ -1,35 +1,39 @@
 """Threading planner: SKTs that are collision-free *as executed*.
 
-An SKT is executed with the frames the SKT rule gives its positions (x = direction of motion,
-y = x × g, z = x × y; :func:`skt_lib.planning.trajectory.executed_path`), so the object's
-orientation is tied to the direction it moves — it is threaded along the path like a ring
-along a wire. Planning in SE(3) and keeping only the positions (what the first version did)
-certified poses that were never executed: 80 % of those paths penetrated the support when
-replayed with rule frames. This planner searches keypoint positions only, with every pose
-checked at exactly the frame execution will give it:
+An SKT is executed with its rotation-minimizing frames (:func:`skt_lib.geometry.skt.skt_frames`:
+x = direction of motion, the roll carried along the path from the hanging orientation), so the
+object's orientation is tied to the way it moves — it is threaded along the path like a ring
+along a wire, over an upturned tip and down along it as well as straight in. This planner
+searches keypoint positions only, with every pose checked at exactly the frame execution will
+give it:
 
 - a tree grows backward from the hang ξ_0 with edges of ``step_m``; the first ``lead_in_m``
-  is a straight line along the hanging keypoint's x axis, so the object arrives along its
-  threading direction and ends at its hanging orientation, not pitched by the last motion;
-- an edge may turn the motion direction by at most ``max_turn_deg`` from the next edge and
-  pitch it at most ``max_pitch_deg`` from horizontal (the rule is undefined for vertical
-  motion and a steep pitch tips the object over);
-- the release ξ_0 is the hanging keypoint, or, where an object of the probe does not fit
-  there (a mug's body against the wall, a narrow aperture on a thick arm), the first clear
-  point set back along the approach (≤ ``max_setback_m``) and lifted (≤ ``max_lift_m``):
-  released there, the object slides or drops into the hang;
-- every pose is checked with the *probe*: the reference object and every training object,
-  each placed at its own keypoint frame, against the support and the wall with a clearance.
-  The frame a pose gets depends on the edge before it (the rule uses the motion *arriving*
-  at a waypoint, and execution slerps between waypoint frames), so adding a child re-checks
-  its parent's edge with the orientation that child gives it;
-- when a node reaches the start region, the path is extended straight to the canonical
-  start (when given: the region's centre) where that stretch keeps the limits and is clear,
-  so SKTs of one support start at one point and differ only where the support makes them;
-  then it is shortcut (random, seeded, each candidate
-  checked as executed), resampled to the evaluated ``T`` waypoints, and checked once more as
-  executed at that resolution; a path that fails there is dropped and a fresh tree grows
-  (the same budget). What passes is what ``sim_eval`` executes.
+  is a straight line along the arrival direction — the hanging keypoint's x axis or, where
+  that is blocked (an upright in front of the hang), the nearest clear direction turned from
+  it — whose rule frame anchors the SKT frames: the hanging orientation the object ends at;
+- each node carries the frame its parent's is transported to along the edge (the minimal
+  rotation between consecutive motion directions), so frames are defined while the tree
+  grows, for any direction of motion — vertical included (no pitch limit); an edge may turn
+  the motion by at most ``max_turn_deg`` from the next edge;
+- the release ξ_0 is the hanging keypoint, or where the probe does not fit there, a point
+  at most ``max_lift_m`` above it (the object drops in); nothing is set back in front of the
+  hang, so every SKT this planner returns ends at the hang;
+- every pose is checked with the *probe*: the reference object (and, when asked, every
+  training object) at its own keypoint frame, against the support and the wall. The frame at
+  a waypoint depends on the motion arriving at it, so adding a child re-checks its parent's
+  edge with the orientation that child gives it;
+- samples are drawn in the start region (``goal_bias``), near the support's surface
+  (``surface_bias``, from the caller's ``sample_near``: points offset from the mesh along its
+  normals, so the tree follows hooks and tips of any shape, imported meshes included), or
+  uniformly in the bounds;
+- when a node reaches the start region, the path is joined straight to the canonical
+  start (when given: the region's centre) from the first of its vertices where that stretch
+  keeps the turn limit and is clear, so SKTs of one support start at one point and differ only where the support makes
+  them; then it is shortcut (random, seeded; a shortcut rolls the frames of everything
+  before it, so every segment whose frames change is re-checked), resampled to the evaluated
+  ``T`` waypoints, and checked once more as executed at that resolution; a path that fails
+  there is dropped and a fresh tree grows (the same budget). What passes is what
+  ``sim_eval`` executes.
 
 Deterministic: the caller's generator drives every sample; the budget is counted in checks.
 """
@@ -41,10 +45,9 @@ import numpy as np
 
 from skt_lib.errors import ItemFailure
 from skt_lib.geometry.se3 import skt_rotation
-from skt_lib.planning.trajectory import arc_length, executed_path, resample, skt_frames
+from skt_lib.geometry.skt import arc_length, executed_path, minimal_rotation, resample, skt_frames
 
 
-SETBACK_STEP_M = 0.005
 LIFT_STEP_M = 0.002
 #: A tree that has added fewer than STUCK_NODES nodes after STUCK_CHECKS checks is stuck at
 #: its release: the next release candidate is tried.
@@ -59,13 +62,12 @@ class ThreadingFailed(ItemFailure):
 class ThreadSettings:
     step_m: float  # tree edge length
     max_turn_deg: float  # largest change of motion direction between consecutive edges
-    max_pitch_deg: float  # largest angle of a motion direction from horizontal
     lead_in_m: float  # straight final approach along the hanging keypoint's x axis
-    max_setback_m: float  # ξ_0 may stop this far short of the hang, back along the approach
-    max_lift_m: float  # … and this far above it
+    max_lift_m: float  # ξ_0 may be this far above the hang (the object drops in)
     check_step_m: float  # largest motion of any probe point between checked poses
     probe_radius_m: float  # farthest probe point from the keypoint
     goal_bias: float  # share of tree samples drawn in the start region
+    surface_bias: float  # share of tree samples drawn near the support's surface
     max_checks: int  # budget, in pose checks
     shortcut_steps: int  # shortcut attempts on the found path
     T: int  # waypoints the SKT is executed with (resampled)
@@ -79,12 +81,10 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.arccos(np.clip(np.dot(a, b), -1.0, 1.0)))
 
 
-def limit_direction(d: np.ndarray, prev: np.ndarray, max_turn: float, max_pitch: float) -> np.ndarray:
-    """Unit direction closest to ``d`` within ``max_turn`` rad of ``prev`` and ``max_pitch``
-    rad of horizontal (both unit vectors; ``prev`` must satisfy the pitch limit)."""
+def limit_direction(d: np.ndarray, prev: np.ndarray, max_turn: float) -> np.ndarray:
+    """Unit direction closest to ``d`` within ``max_turn`` rad of ``prev`` (unit)."""
     d = _unit(np.asarray(d, float))
-    a = _angle(d, prev)
-    if a > max_turn:
+    if _angle(d, prev) > max_turn:
         axis = np.cross(prev, d)
         if np.linalg.norm(axis) < 1e-9:  # opposite: turn about a horizontal axis
             axis = np.cross(prev, [0.0, 0.0, 1.0])
@@ -92,12 +92,18 @@ def limit_direction(d: np.ndarray, prev: np.ndarray, max_turn: float, max_pitch:
                 axis = np.array([0.0, 1.0, 0.0])
         axis = _unit(axis)
         d = prev * np.cos(max_turn) + np.cross(axis, prev) * np.sin(max_turn)
-    pitch = np.arcsin(np.clip(d[2], -1.0, 1.0))
-    if abs(pitch) > max_pitch:
-        h = d[:2] if np.linalg.norm(d[:2]) > 1e-9 else prev[:2]
-        h = _unit(h) * np.cos(max_pitch)
-        d = np.array([h[0], h[1], np.sign(pitch) * np.sin(max_pitch)])
     return _unit(d)
+
+
+def transport(r: np.ndarray, new_x: np.ndarray) -> np.ndarray:
+    """The frame ``r`` (3, 3) turned by the smallest rotation taking its x axis onto the unit
+    ``new_x`` — one step of :func:`~skt_lib.geometry.skt.skt_frames`."""
+    return minimal_rotation(r[:, 0], new_x, r[:, 1]) @ r
+
+
+def exec_frames(points: np.ndarray) -> np.ndarray:
+    """SKT frames ``(N, 4, 4)`` of the polyline ``points`` given in *execution* order."""
+    return skt_frames(points[::-1])[::-1]
 
 
 def _quat(r: np.ndarray) -> np.ndarray:
@@ -134,7 +140,7 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 class _Checker:
     """Counts pose checks against the budget; checks straight segments between two frames
-    exactly as :func:`~skt_lib.planning.trajectory.interpolate` executes them (linear
+    exactly as :func:`~skt_lib.geometry.skt.interpolate` executes them (linear
     position, slerp rotation, at most ``check_step_m`` of probe-point motion per pose)."""
 
     def __init__(self, collides: Callable[[np.ndarray, np.ndarray], bool], s: ThreadSettings):
@@ -163,40 +169,53 @@ class _Checker:
                 return False
         return True
 
-    def path(self, points: np.ndarray, lo: int = 0, hi: int | None = None) -> bool:
-        """The polyline ``points (N, 3)`` in *execution* order, executed with rule frames:
-        segments ``lo..hi`` (exclusive) checked, the first pose included when ``lo == 0``."""
-        frames = skt_frames(points[::-1])[::-1]  # rule frames, execution order
-        hi = len(points) - 1 if hi is None else hi
-        if lo == 0 and not self.frames(frames[:1]):
-            return False
-        return all(self.segment(points[k], points[k + 1], frames[k][:3, :3], frames[k + 1][:3, :3])
-                   for k in range(max(lo, 0), min(hi, len(points) - 1)))
+    def path(self, points: np.ndarray, old: np.ndarray, old_frames: np.ndarray) -> np.ndarray | None:
+        """Check the polyline ``points (N, 3)`` (execution order) as executed, where it differs
+        from a path already checked: ``old (N,)`` gives each vertex's index in that path (−1:
+        a new vertex) and ``old_frames`` that path's executed frames. A segment is checked
+        when an end is new or its frame changed (transport carries a change outward). Returns
+        the new frames ``(N, 4, 4)``, or ``None`` when a checked pose collides."""
+        frames = exec_frames(points)
+        same = np.zeros(len(points), bool)
+        known = old >= 0
+        same[known] = np.all(np.abs(frames[known, :3, :3] - old_frames[old[known], :3, :3]) < 1e-9,
+                             axis=(1, 2))
+        if not same[0] and not self.frames(frames[:1]):
+            return None
+        for k in range(len(points) - 1):
+            if same[k] and same[k + 1] and old[k + 1] == old[k] + 1:
+                continue
+            if not self.segment(points[k], points[k + 1], frames[k][:3, :3], frames[k + 1][:3, :3]):
+                return None
+        return frames
 
 
 def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
                    sample_start: Callable[[np.random.Generator], np.ndarray],
                    lower: np.ndarray, upper: np.ndarray, collides: Callable[[np.ndarray], bool],
                    s: ThreadSettings, rng: np.random.Generator,
-                   start_point: np.ndarray | None = None) -> tuple[np.ndarray, int]:
-    """Keypoint positions ``(N, 3)``, ξ_0 (the hang) first, vertices at most ``step_m`` apart,
-    whose execution (rule frames) is clear for ``collides``; and the checks used.
+                   start_point: np.ndarray | None = None,
+                   sample_near: Callable[[np.random.Generator], np.ndarray] | None = None
+                   ) -> tuple[np.ndarray, int]:
+    """Keypoint positions ``(N, 3)``, ξ_0 (within ``max_lift_m`` above the hang) first,
+    vertices at most ``step_m`` apart, whose execution (SKT frames) is clear for
+    ``collides``; and the checks used.
 
     ``goal``: the hanging keypoint frame (4×4, support frame; its x axis is the threading
     direction). ``in_start(p)``: whether a keypoint position may start the SKT;
-    ``sample_start(rng)``: a position in that region. ``collides(frame)``: the probe at a
-    keypoint frame touches the support or wall. ``start_point``: the canonical start the
-    path is extended to when it can be (see the module notes). Raises :class:`ThreadingFailed`."""
-    turn, pitch = np.radians(s.max_turn_deg), np.radians(s.max_pitch_deg)
+    ``sample_start(rng)``: a position in that region. ``collides(position, quat)``: the probe
+    at a keypoint pose touches the support or wall. ``start_point``: the canonical start the
+    path is extended to when it can be; ``sample_near(rng)``: a position near the support's
+    surface (drawn with ``surface_bias``). Raises :class:`ThreadingFailed`."""
+    turn = np.radians(s.max_turn_deg)
     check = _Checker(collides, s)
-    a0 = limit_direction(goal[:3, 0], goal[:3, 0], np.pi, pitch)
-    r0 = skt_rotation(a0)
+    sampler = _Sampler(in_start, sample_start, sample_near, lower, upper, s)
     n_rejected = 0
-    for lead in _releases(goal[:3, 3], a0, r0, check, s):
+    for lead, a0, r0 in _releases(goal[:3, 3], _unit(goal[:3, 0]), check, s):
         while True:  # fresh trees from this release until one survives resampling (one budget)
             n_before = check.n
             try:
-                path = _grow(lead, a0, in_start, sample_start, lower, upper, check, s, rng)
+                path = _grow(lead, a0, r0, in_start, sampler, lower, upper, check, s, rng)
             except ThreadingFailed:
                 if n_rejected:
                     raise ThreadingFailed(f"{n_rejected} path(s) collided once resampled to "
@@ -204,9 +223,10 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
                 raise
             if path is None:
                 break  # stuck: next release
+            frames = exec_frames(path)
             if start_point is not None:
-                path = _snap_start(path, np.asarray(start_point, float), check, s, turn, pitch)
-            path = _shortcut(path, check, s, turn, pitch, rng)
+                path, frames = _snap_start(path, frames, np.asarray(start_point, float), check, s, turn)
+            path = _shortcut(path, frames, check, s, turn, rng)
             dense = densify(path, s.step_m)[::-1]  # ξ_0 first
             final = executed_path(resample(dense, s.T), s.check_step_m, s.probe_radius_m)
             if check.frames(final):
@@ -220,14 +240,38 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
     raise ThreadingFailed("the tree could not leave any clear release", "stuck")
 
 
-def _grow(lead: np.ndarray, a0: np.ndarray, in_start, sample_start, lower, upper,
-          check: _Checker, s: ThreadSettings, rng: np.random.Generator) -> np.ndarray | None:
+@dataclass(frozen=True)
+class _Sampler:
+    in_start: Callable
+    sample_start: Callable
+    sample_near: Callable | None
+    lower: np.ndarray
+    upper: np.ndarray
+    s: ThreadSettings
+
+    def __call__(self, rng: np.random.Generator) -> np.ndarray:
+        u = rng.random()
+        if u < self.s.goal_bias:
+            return self.sample_start(rng)
+        if self.sample_near is not None and u < self.s.goal_bias + self.s.surface_bias:
+            return self.sample_near(rng)
+        return rng.uniform(self.lower, self.upper)
+
+
+def _grow(lead: np.ndarray, a0: np.ndarray, r0: np.ndarray, in_start, sampler: _Sampler,
+          lower, upper, check: _Checker, s: ThreadSettings,
+          rng: np.random.Generator) -> np.ndarray | None:
     """Grow the tree backward from the lead-in's far end until a node lies in the start
     region; the chain to it in execution order (start … ξ_0), or ``None`` when the tree is
-    stuck (fewer than :data:`STUCK_NODES` nodes after :data:`STUCK_CHECKS` checks)."""
-    turn, pitch = np.radians(s.max_turn_deg), np.radians(s.max_pitch_deg)
+    stuck (fewer than :data:`STUCK_NODES` nodes after :data:`STUCK_CHECKS` checks).
+
+    Node v (not the root) stores ``dirs[v]``, the execution direction from v to its parent,
+    and ``rots[v]``, the SKT frame at its parent when the path runs through v (x = ``dirs[v]``):
+    the parent's own ``rots`` transported onto ``dirs[v]``."""
+    turn = np.radians(s.max_turn_deg)
     pos = list(lead)
-    dirs = [a0] * len(lead)  # execution direction from the node to its parent
+    dirs = [a0] * len(lead)
+    rots = [r0] * len(lead)
     parent = [-1] + list(range(len(lead) - 1))
     first_free = len(lead) - 1  # the root and the lead-in's inside are not extended
     leaf = len(lead) - 1 if in_start(lead[-1]) else None
@@ -237,22 +281,23 @@ def _grow(lead: np.ndarray, a0: np.ndarray, in_start, sample_start, lower, upper
             raise ThreadingFailed(f"no path within {s.max_checks} checks", "no_path")
         if check.n - n0 > STUCK_CHECKS and len(pos) - len(lead) < STUCK_NODES:
             return None
-        q = sample_start(rng) if rng.random() < s.goal_bias else rng.uniform(lower, upper)
+        q = sampler(rng)
         cand = np.asarray(pos[first_free:])
         i = first_free + int(np.argmin(np.linalg.norm(cand - q, axis=1)))
         if np.linalg.norm(q - pos[i]) < 1e-9:
             continue
-        d = limit_direction(pos[i] - q, dirs[i], turn, pitch)  # execution direction new → i
+        d = limit_direction(pos[i] - q, dirs[i], turn)  # execution direction new → i
         new = pos[i] - s.step_m * d
         if np.any(new < lower) or np.any(new > upper):
             continue
-        rd = skt_rotation(d)
+        rd = transport(rots[i], d)  # the frame at i (and at the new leaf) with this child
         if not check.segment(new, pos[i], rd, rd):
             continue
-        if parent[i] >= 0 and not check.segment(pos[i], pos[parent[i]], rd, skt_rotation(dirs[i])):
+        if parent[i] >= 0 and not check.segment(pos[i], pos[parent[i]], rd, rots[i]):
             continue
         pos.append(new)
         dirs.append(d)
+        rots.append(rd)
         parent.append(i)
         if in_start(new):
             leaf = len(pos) - 1
@@ -262,25 +307,48 @@ def _grow(lead: np.ndarray, a0: np.ndarray, in_start, sample_start, lower, upper
     return np.asarray([pos[k] for k in chain])
 
 
-def _releases(hang: np.ndarray, a0: np.ndarray, r0: np.ndarray, check: _Checker,
-             s: ThreadSettings) -> np.ndarray:
-    """Candidate straight lead-ins ``(n + 1, 3)``, ξ_0 first, along ``a0`` into the release
-    ξ_0, nearest first: the hanging keypoint, or points set back along the approach (``SETBACK_STEP_M``
-    steps, ≤ ``max_setback_m``) and lifted (``LIFT_STEP_M`` steps, ≤ ``max_lift_m``) — the
-    smallest offset first — where the probe at the rule frame clears the whole lead-in. A
-    tree stuck at one release tries the next (a larger lift leaves room to turn)."""
+#: Arrival directions tried at the release, as (pitch, yaw) offsets in degrees from the
+#: hanging keypoint's x (negative pitch: arriving from above), nearest first.
+ARRIVAL_OFFSETS_DEG = sorted(((p, y) for p in (0, -15, 15, -30, 30, -45, -60, -75)
+                              for y in (0, -15, 15, -30, 30)), key=lambda o: (np.hypot(*o), o))
+
+
+def arrival_directions(a0: np.ndarray) -> list[np.ndarray]:
+    """Unit arrival directions around ``a0`` (:data:`ARRIVAL_OFFSETS_DEG`), ``a0`` first."""
+    side = np.cross([0.0, 0.0, 1.0], a0)
+    side = side / np.linalg.norm(side) if np.linalg.norm(side) > 1e-9 else np.array([0.0, 1.0, 0.0])
+    up = np.cross(a0, side)  # a0's "up": pitch turns a0 toward it
+    out = []
+    for pitch, yaw in ARRIVAL_OFFSETS_DEG:
+        p, y = np.radians(pitch), np.radians(yaw)
+        d = np.cos(p) * (np.cos(y) * a0 + np.sin(y) * side) + np.sin(p) * up
+        out.append(_unit(d))
+    return out
+
+
+def _releases(hang: np.ndarray, a0: np.ndarray, check: _Checker, s: ThreadSettings):
+    """Candidate straight lead-ins into the release ξ_0, as ``(lead (n + 1, 3) ξ_0 first,
+    arrival direction, its anchor frame)``: the hanging keypoint, then points lifted above it
+    (``LIFT_STEP_M`` steps, ≤ ``max_lift_m``); arriving along the hanging keypoint's x, then
+    along directions turned from it (:func:`arrival_directions`: where an upturned part stands
+    in front of the hang the object must come down into it); where the probe at the anchor
+    frame clears the whole lead-in. The anchor is the rule's frame of the arrival — the
+    hanging orientation the SKT frames give ξ_0. A tree stuck at one release tries the next."""
     n = max(1, int(np.ceil(s.lead_in_m / s.step_m)))
     found = False
-    offsets = [(b, h) for b in np.arange(0.0, s.max_setback_m + 1e-9, SETBACK_STEP_M)
-               for h in np.arange(0.0, s.max_lift_m + 1e-9, LIFT_STEP_M)]
-    for back, lift in sorted(offsets, key=lambda o: (np.hypot(*o), o)):
-        p0 = hang - back * a0 + [0.0, 0.0, lift]
-        lead = p0 - np.outer(np.arange(n + 1) * s.lead_in_m / n, a0)
-        if check.frames(_frame(lead[-1], r0)[None]) and check.segment(lead[-1], p0, r0, r0):
-            found = True
-            yield lead
+    for d in arrival_directions(a0):
+        try:
+            r0 = skt_rotation(d)
+        except ValueError:  # vertical: the rule gives no anchor
+            continue
+        for lift in np.arange(0.0, s.max_lift_m + 1e-9, LIFT_STEP_M):
+            p0 = hang + [0.0, 0.0, lift]
+            lead = p0 - np.outer(np.arange(n + 1) * s.lead_in_m / n, d)
+            if check.frames(_frame(lead[-1], r0)[None]) and check.segment(lead[-1], p0, r0, r0):
+                found = True
+                yield lead, d, r0
     if not found:
-        raise ThreadingFailed("no clear straight lead-in within the set-back and lift ranges",
+        raise ThreadingFailed("no clear straight lead-in at the hang or lifted above it",
                               "lead_in_blocked")
 
 
@@ -299,36 +367,62 @@ def densify(points: np.ndarray, step: float) -> np.ndarray:
     return np.concatenate(out)
 
 
-def _turns_ok(points: np.ndarray, lo: int, hi: int, turn: float, pitch: float) -> bool:
-    """Turn and pitch limits at every vertex/segment of ``points`` between ``lo`` and ``hi``."""
+def _turns_ok(points: np.ndarray, lo: int, hi: int, turn: float) -> bool:
+    """Turn limit at every vertex of ``points`` between segments ``lo`` and ``hi``."""
     seg = np.diff(points, axis=0)
     seg = seg / np.linalg.norm(seg, axis=1, keepdims=True)
-    lo, hi = max(lo, 0), min(hi, len(seg))
-    if np.any(np.abs(np.arcsin(np.clip(seg[lo:hi, 2], -1, 1))) > pitch + 1e-9):
-        return False
-    return all(_angle(seg[k], seg[k + 1]) <= turn + 1e-9 for k in range(max(lo - 1, 0), min(hi, len(seg) - 1)))
+    lo, hi = max(lo - 1, 0), min(hi, len(seg) - 1)
+    if hi <= lo:
+        return True
+    cos = np.sum(seg[lo:hi] * seg[lo + 1:hi + 1], axis=1)
+    return bool(np.all(np.arccos(np.clip(cos, -1.0, 1.0)) <= turn + 1e-9))
 
 
-def _snap_start(path: np.ndarray, start: np.ndarray, check: _Checker, s: ThreadSettings,
-                turn: float, pitch: float) -> np.ndarray:
-    """``path`` (execution order) with a straight stretch from ``start`` to its first vertex
-    prepended, when the stretch keeps the turn and pitch limits and its execution (with the
-    first vertex's frame it changes) is clear; otherwise ``path`` unchanged."""
+def _snap_start(path: np.ndarray, frames: np.ndarray, start: np.ndarray, check: _Checker,
+                s: ThreadSettings, turn: float) -> tuple[np.ndarray, np.ndarray]:
+    """``path`` (execution order) begun at ``start`` instead: a straight stretch from
+    ``start`` to its vertex k replaces the vertices before k, for the smallest k (over the
+    first half of the path) where the stretch keeps the turn limit and its execution (with
+    the frames it changes) is clear; otherwise ``path`` unchanged. With its frames."""
     if np.linalg.norm(path[0] - start) < 1e-9:
-        return path
-    head = densify(np.stack([start, path[0]]), s.step_m)[:-1]
-    cand = np.concatenate([head, path])
-    hi = len(head) + 2  # the new stretch and the old first edge, whose start frame changes
-    if _turns_ok(cand, 0, hi, turn, pitch) and check.path(cand, 0, hi):
-        return cand
-    return path
+        return path, frames
+    heads = ((k, densify(np.stack([start, path[k]]), s.step_m)[:-1])
+             for k in range(max(1, len(path) // 2)))
+    steered = _steer(start, path, s.step_m, turn)
+    for k, head in [*heads, *([(0, steered)] if steered is not None else [])]:
+        cand = np.concatenate([head, path[k:]])
+        if not _turns_ok(cand, 0, len(head) + 1, turn):
+            continue
+        old = np.concatenate([np.full(len(head), -1), np.arange(k, len(path))])
+        new_frames = check.path(cand, old, frames)
+        if new_frames is not None:
+            return cand, new_frames
+    return path, frames
 
 
-def _shortcut(path: np.ndarray, check: _Checker, s: ThreadSettings, turn: float, pitch: float,
-              rng: np.random.Generator) -> np.ndarray:
+def _steer(start: np.ndarray, path: np.ndarray, step: float, turn: float,
+           max_edges: int = 60) -> np.ndarray | None:
+    """Vertices from ``start`` up to (not including) ``path[0]`` (execution order) that turn
+    at most ``turn`` per edge: grown backward from ``path[0]``, each edge turned toward
+    ``start`` as far as the limit allows, until ``start`` is one edge away; ``None`` when it
+    does not get there within ``max_edges``."""
+    pts, nxt = [path[0]], _unit(path[1] - path[0])
+    for _ in range(max_edges):
+        to_start = pts[-1] - start
+        if np.linalg.norm(to_start) <= step:
+            if _angle(_unit(to_start), nxt) <= turn + 1e-9:
+                return densify(np.stack([start, *pts[::-1]]), step)[:-1]
+            return None
+        nxt = limit_direction(to_start, nxt, turn)
+        pts.append(pts[-1] - step * nxt)
+    return None
+
+
+def _shortcut(path: np.ndarray, frames: np.ndarray, check: _Checker, s: ThreadSettings,
+              turn: float, rng: np.random.Generator) -> np.ndarray:
     """Seeded shortcutting of an execution-ordered path; the final lead-in is kept straight.
     A straight replacement between vertices ``i`` and ``j`` is kept only when it respects the
-    turn and pitch limits and its execution (with the neighbouring frames it changes) is clear."""
+    turn limit and its execution is clear wherever its frames change."""
     n_keep = max(1, int(np.ceil(s.lead_in_m / s.step_m)))
     for _ in range(s.shortcut_steps):
         last = len(path) - 1 - n_keep  # vertices after this belong to the lead-in
@@ -339,11 +433,12 @@ def _shortcut(path: np.ndarray, check: _Checker, s: ThreadSettings, turn: float,
             continue
         mid = densify(path[[i, j]], s.step_m)[1:-1]
         cand = np.concatenate([path[: i + 1], mid, path[j:]])
-        k_hi = i + 1 + len(mid) + 1
-        if not _turns_ok(cand, i - 1, k_hi + 1, turn, pitch):
+        if not _turns_ok(cand, i, i + len(mid) + 2, turn):
             continue
-        if check.path(cand, max(i - 1, 0), k_hi + 1):
-            path = cand
+        old = np.concatenate([np.arange(i + 1), np.full(len(mid), -1), np.arange(j, len(path))])
+        new_frames = check.path(cand, old, frames)
+        if new_frames is not None:
+            path, frames = cand, new_frames
     return path
 
 

@@ -18,10 +18,12 @@ Two hands (``TrialTask.hand``):
   the release it is removed, so it cannot hold the object.
 
 Sequence: start at ξ_{T-1} (set-up teleport, the only one) → follow every pose of
-:func:`skt_lib.planning.trajectory.executed_path` to ξ_0 (no object point moves more than
+:func:`skt_lib.geometry.skt.executed_path` to ξ_0 (no object point moves more than
 ``step_m`` per command), checking the keypoint tracking error after every command → hold →
 release: constraint removed, fingers open, robot–object collisions on, retreat along the
-approach axis → perturb → settle → predicate.
+approach axis → perturb (the object at ``linear_damping``/``angular_damping``: PyBullet's
+default 0.04 in the committed params, as the anchors') → settle (at the ``settle_*`` damping:
+an undamped hung object keeps swinging) → predicate.
 
 Outcomes (``failure_reason``, empty on success; :data:`REASONS`):
 
@@ -46,7 +48,7 @@ import numpy as np
 import pybullet as pb
 
 from skt_lib.geometry.se3 import invert, matrix_pose, pose_matrix
-from skt_lib.planning.trajectory import executed_path
+from skt_lib.geometry.skt import executed_path
 from skt_lib.sim.grasp import Grasp, GraspFailure, choose_grasp
 from skt_lib.sim.hanging import Perturbation, check_hang, perturb_phases
 from skt_lib.sim.robot import FINGER_OPEN_M, GRASP_LINK, Panda
@@ -65,8 +67,10 @@ class TrialSettings:
     dt: float
     solver_iterations: int
     friction: float
-    linear_damping: float  # of the object, 1/s (World.load)
-    angular_damping: float  # of the object, 1/s (World.load)
+    linear_damping: float  # of the object, 1/s (World.load): carried, released, perturbed
+    angular_damping: float  # of the object, 1/s
+    settle_linear_damping: float  # of the object during the final settle only, 1/s
+    settle_angular_damping: float
     robot_base: tuple[float, float, float]  # world position of the Panda base, m
     step_m: float  # max motion of any object point per command
     steps_per_command: int
@@ -223,6 +227,9 @@ def run_trial(task: TrialTask) -> dict:
                 row["touched_support"] |= bool(world.contacts(obj, support))
         phases = perturb_phases(s.perturbation)
         for i, (gravity, steps) in enumerate(phases):
+            if i == len(phases) - 1:  # the settle may damp (DESIGN §5); the perturbation does not
+                pb.changeDynamics(obj, -1, linearDamping=s.settle_linear_damping,
+                                  angularDamping=s.settle_angular_damping, physicsClientId=world.cid)
             world.set_gravity_support(gravity)
             trace.step(steps, "settle" if i == len(phases) - 1 else "perturb")
             row["touched_support"] |= bool(world.contacts(obj, support))

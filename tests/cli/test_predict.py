@@ -8,7 +8,7 @@ import pytest
 from skt_lib.cli.predict import prepare_cloud
 from skt_lib.geometry.se3 import quat_to_matrix
 from skt_lib.learning.predictor import SktPredictor
-from skt_lib.planning.trajectory import skt_frames
+from skt_lib.geometry.skt import skt_frames
 from tests.cli.conftest import run_skt, save_ply
 
 

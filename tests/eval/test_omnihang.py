@@ -19,7 +19,7 @@ from skt_lib.eval.omnihang import (
     _poses,
     plan_omnihang,
 )
-from skt_lib.planning.trajectory import arc_length
+from skt_lib.geometry.skt import arc_length
 
 PEG_R, PEG_LEN = 0.005, 0.08
 RING_R, TUBE_R = 0.02, 0.003

@@ -1,12 +1,15 @@
-"""skt_frames per waypoint against frames worked out by hand (columns x, y, z; g = −z):
-frame i takes the motion arriving at ξ_i, from ξ_{i+1} to ξ_i; ξ_{T-1} reuses the segment
-ξ_{T-1}→ξ_{T-2}; vertical segments take the nearest defined frame (ties: toward ξ_0)."""
+"""The SKT contract (DESIGN §3): rotation-minimizing frames anchored at the hang, against
+frames worked out by hand (columns x, y, z; g = −z), the per-step reference, closed forms
+(a helix's holonomy) and the rule where they must equal it; resampling by travel and turning;
+the executed path."""
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
-from skt_lib.planning.trajectory import (
-    executed_path, interpolate, keypoint_positions, max_point_step, resample, skt_frames,
+from skt_lib.geometry.skt import (
+    TURN_RADIUS_M, executed_path, interpolate, keypoint_positions, max_point_step, resample,
+    rule_frames, skt_frames, skt_frames_naive, turning_length,
 )
 
 # x = motion direction, y = x × (0, 0, −1), z = x × y — evaluated by hand:
@@ -14,10 +17,10 @@ from skt_lib.planning.trajectory import (
 R_MINUS_X = np.array([[-1, 0, 0], [0, -1, 0], [0, 0, 1]], float)
 # motion (−0.6, 0, −0.8) (down-tilted): y = (0, −0.6, 0)/0.6 = (0, −1, 0), z = (−0.8, 0, 0.6)
 R_TILT_DOWN = np.array([[-0.6, 0, -0.8], [0, -1, 0], [-0.8, 0, 0.6]], float)
-# motion −y:              x = (0, −1, 0),      y = (1, 0, 0),  z = (0, 0, 1)
+# motion straight down (0, 0, −1), transported from R_TILT_DOWN about y: z = (−1, 0, 0)
+R_DOWN = np.array([[0, 0, -1], [0, -1, 0], [-1, 0, 0]], float)
+# motion −y, transported from R_MINUS_X by a quarter turn about +z: y = (1, 0, 0)
 R_MINUS_Y = np.array([[0, 1, 0], [-1, 0, 0], [0, 0, 1]], float)
-# motion (0.6, 0, 0.8) (up-tilted, +x): y = (0, 0.6, 0)/0.6 = (0, 1, 0), z = (−0.8, 0, 0.6)
-R_TILT_UP = np.array([[0.6, 0, -0.8], [0, 1, 0], [0.8, 0, 0.6]], float)
 
 
 def _check(frames, positions, rotations):
@@ -28,33 +31,147 @@ def _check(frames, positions, rotations):
         assert f[3] == pytest.approx([0, 0, 0, 1])
 
 
-def test_frames_on_tilted_motion_per_waypoint():
-    # ξ_0 first; execution runs ξ_4 → ξ_0. Motion arriving at ξ_i is ξ_i − ξ_{i+1}.
+def test_frames_by_hand_through_a_vertical_descent():
+    """Down a vertical stretch (where the rule is undefined) the frame keeps its roll, and
+    ξ_0 gets the rule's frame of the arrival."""
     pos = np.zeros((5, 3))
-    pos[1] = pos[0] + [0.05, 0, 0]            # ξ_1→ξ_0: −x
+    pos[1] = pos[0] + [0.05, 0, 0]            # ξ_1→ξ_0: −x (arrival: the anchor)
     pos[2] = pos[1] + [0.03, 0, 0.04]         # ξ_2→ξ_1: (−0.6, 0, −0.8)
-    pos[3] = pos[2] + [0, 0.02, 0]            # ξ_3→ξ_2: −y
-    pos[4] = pos[3] + [-0.006, 0, -0.008]     # ξ_4→ξ_3: (0.6, 0, 0.8)
+    pos[3] = pos[2] + [0, 0, 0.02]            # ξ_3→ξ_2: straight down
+    pos[4] = pos[3] + [0, 0, 0.03]            # ξ_4→ξ_3: straight down (the start reuses it)
     pos += [0.1, -0.02, 0.3]
-    # frame 4 (the start) reuses the segment leaving it
-    _check(skt_frames(pos), pos, [R_MINUS_X, R_TILT_DOWN, R_MINUS_Y, R_TILT_UP, R_TILT_UP])
+    _check(skt_frames(pos), pos, [R_MINUS_X, R_TILT_DOWN, R_DOWN, R_DOWN, R_DOWN])
+    assert np.isnan(rule_frames(pos)[2:, :3, 1]).all()  # the rule has no frame there
 
 
-def test_frames_on_vertical_motion_per_waypoint():
-    # vertical segments get the nearest defined frame; a tie goes toward ξ_0
-    pos = np.zeros((6, 3))
-    pos[1] = pos[0] + [0, 0, 0.02]            # segment 0 (ξ_1→ξ_0): straight down, undefined
-    pos[2] = pos[1] + [0.03, 0, 0.04]         # segment 1: tilted down → R_TILT_DOWN
-    pos[3] = pos[2] + [0, 0, 0.01]            # segment 2: straight down (tie 1 vs 3 → 1)
-    pos[4] = pos[3] + [0.05, 0, 0]            # segment 3: −x → R_MINUS_X
-    pos[5] = pos[4] + [0, 0, -0.03]           # segment 4: straight up → nearest: 3
-    _check(skt_frames(pos), pos,  # frame 5 reuses segment 4 (undefined) → nearest: 3
-           [R_TILT_DOWN, R_TILT_DOWN, R_TILT_DOWN, R_MINUS_X, R_MINUS_X, R_MINUS_X])
-    # a purely vertical descent has no SKT frames
+def test_frames_by_hand_where_the_horizontal_motion_turns_back():
+    """Horizontal motion turning back (−x, then −y, then +x): the transported frame turns
+    with the motion, y (0,−1,0) → (1,0,0) → (0,1,0), z stays up — as the rule says there."""
+    pos = np.zeros((4, 3))
+    pos[1] = pos[0] + [0.02, 0, 0]            # −x
+    pos[2] = pos[1] + [0, 0.02, 0]            # −y
+    pos[3] = pos[2] + [-0.02, 0, 0]           # +x
+    r_plus_x = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    _check(skt_frames(pos), pos, [R_MINUS_X, R_MINUS_Y, r_plus_x, r_plus_x])
+    # horizontal motion only: the rule says the same
+    assert np.allclose(skt_frames(pos), rule_frames(pos), atol=1e-12)
+
+
+def test_vertical_arrival_takes_the_first_defined_rule_frame_outward():
+    pos = np.zeros((4, 3))
+    pos[1] = pos[0] + [0, 0, 0.02]            # arriving straight down: no rule frame at ξ_0
+    pos[2] = pos[1] + [0.03, 0, 0.04]         # R_TILT_DOWN: the anchor
+    pos[3] = pos[2] + [0.05, 0, 0]            # −x
+    _check(skt_frames(pos), pos, [R_DOWN, R_TILT_DOWN, R_MINUS_X, R_MINUS_X])
     with pytest.raises(ValueError, match="vertical"):
         skt_frames(np.array([[0, 0, 0], [0, 0, 0.01], [0, 0, 0.02]], float))
-    # two waypoints: both frames from the single segment
-    _check(skt_frames(pos[1:3]), pos[1:3], [R_TILT_DOWN, R_TILT_DOWN])
+
+
+def _random_paths(seed: int, n: int):
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        k = int(rng.integers(2, 50))
+        p = np.cumsum(rng.normal(size=(k, 3)) * 0.01, axis=0)
+        if rng.random() < 0.3:  # zero-length segments
+            i = int(rng.integers(1, k))
+            p[i] = p[i - 1]
+        if rng.random() < 0.3:  # vertical segments
+            i = int(rng.integers(1, k))
+            p[i, :2] = p[i - 1, :2]
+        if rng.random() < 0.1:  # a full reversal
+            i = int(rng.integers(1, k - 1)) if k > 2 else 1
+            p[i + 1:] = p[i] - (p[i + 1:] - p[i]) if k > 2 else p[i + 1:]
+        yield p
+
+
+def test_fast_frames_equal_the_per_step_minimal_rotations_on_random_paths():
+    n = 0
+    for p in _random_paths(0, 600):
+        try:
+            fast = skt_frames(p)
+        except ValueError:
+            with pytest.raises(ValueError):
+                skt_frames_naive(p)
+            continue
+        n += 1
+        np.testing.assert_allclose(fast, skt_frames_naive(p), atol=1e-9)
+        r = fast[:, :3, :3]
+        np.testing.assert_allclose(np.einsum("nji,njk->nik", r, r), np.broadcast_to(np.eye(3), r.shape),
+                                   atol=1e-9)
+        assert np.allclose(np.linalg.det(r), 1.0)
+    assert n > 500
+
+
+def test_continuity_no_frame_step_larger_than_the_turn_of_the_motion():
+    for p in _random_paths(1, 300):
+        try:
+            f = skt_frames(p)
+        except ValueError:
+            continue
+        x = f[:, :3, 0]
+        turn = np.arccos(np.clip(np.sum(x[1:] * x[:-1], axis=1), -1, 1))
+        rel = np.einsum("nji,njk->nik", f[:-1, :3, :3], f[1:, :3, :3])
+        step = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1))
+        assert np.all(step <= turn + 1e-7)
+
+
+def test_planar_paths_equal_the_rule():
+    t = np.linspace(0.0, 1.0, 60)
+    # in a vertical plane (not crossing the vertical): an arc over an upturned tip
+    vertical_plane = np.stack([0.1 * t, np.zeros_like(t), 0.04 * np.sin(2.5 * t)], axis=1)
+    # horizontal, turning both ways
+    horizontal = np.stack([0.05 * np.cos(3 * t), 0.05 * np.sin(5 * t), np.full_like(t, 0.2)], axis=1)
+    for p in (vertical_plane, horizontal):
+        np.testing.assert_allclose(skt_frames(p), rule_frames(p), atol=1e-9)
+    # a rotated vertical plane as well
+    rot = Rotation.from_rotvec([0, 0, 0.7]).as_matrix()
+    p = vertical_plane @ rot.T
+    np.testing.assert_allclose(skt_frames(p), rule_frames(p), atol=1e-9)
+
+
+def test_helix_roll_is_the_holonomy_of_its_closed_form():
+    """After one turn of a helix the tangent is back where it started, and parallel transport
+    has rolled the frame about it by the solid angle the tangent swept: 2π(1 − cos α), α the
+    tangent's angle to the helix axis. The rule frame (y kept horizontal) comes back
+    unrolled."""
+    a, b = 0.05, 0.02
+    phi = np.linspace(0.0, 2 * np.pi, 20001)
+    pos = np.stack([a * np.cos(phi), a * np.sin(phi), b * phi], axis=1)[::-1]  # ξ_0: the top
+    f = skt_frames(pos)
+    cos_alpha = b / np.hypot(a, b)
+    expected = 2 * np.pi * (1 - cos_alpha)
+    assert np.allclose(f[0, :3, 0], f[-1, :3, 0], atol=1e-3)  # the same tangent after one turn
+    y0, y1 = f[0, :3, 1], f[-1, :3, 1]
+    roll = np.arctan2(np.dot(np.cross(y0, y1), f[0, :3, 0]), np.dot(y0, y1))
+    wrap = lambda v: (v + np.pi) % (2 * np.pi) - np.pi  # noqa: E731
+    assert min(abs(wrap(roll - expected)), abs(wrap(roll + expected))) < 2e-3
+    assert abs(wrap(roll)) > 1.0  # and it is a real roll, not nothing
+    rule = rule_frames(pos)
+    assert np.allclose(rule[0, :3, :3], rule[-1, :3, :3], atol=1e-3)
+
+
+def test_resample_puts_waypoints_where_the_object_turns():
+    """A 120° bend of 2 mm radius between two straight 5 cm legs: by arc length alone it gets
+    at most one of 20 waypoints; counted with turning, several — in proportion to its weight."""
+    th = np.linspace(0, np.radians(120), 200)
+    r = 0.002
+    bend = np.stack([r * np.sin(th), np.zeros_like(th), r * (1 - np.cos(th))], axis=1)
+    leg_in = np.stack([np.linspace(-0.05, 0, 100)[:-1], np.zeros(99), np.zeros(99)], axis=1)
+    d = np.array([np.cos(np.radians(120)), 0.0, np.sin(np.radians(120))])
+    leg_out = bend[-1] + np.outer(np.linspace(0, 0.05, 100)[1:], d)
+    path = np.vstack([leg_in, bend, leg_out])
+    in_bend = lambda w: int(np.sum(np.linalg.norm(w - [0.0, 0.0, r], axis=1) <= r + 1e-6))  # noqa: E731
+    assert in_bend(resample(path, 20, turn_radius_m=0.0)) <= 1
+    turned = resample(path, 20)
+    weight = TURN_RADIUS_M * np.radians(120) / (TURN_RADIUS_M * np.radians(120) + 0.1 + r * np.radians(120))
+    assert in_bend(turned) >= int(np.floor(weight * 19)) - 1 >= 5
+    # the turning length is arc length plus the turn at the stated radius
+    s = turning_length(path)
+    assert s[-1] == pytest.approx(0.1 + r * np.radians(120) + TURN_RADIUS_M * np.radians(120), rel=1e-3)
+    # straight paths: plain arc-length spacing
+    line = np.outer(np.linspace(0, 1, 7) ** 2, [0.1, 0.02, -0.03])
+    np.testing.assert_allclose(resample(line, 5), np.outer(np.linspace(0, 1, 5), [0.1, 0.02, -0.03]),
+                               atol=1e-12)
 
 
 def test_executed_path_runs_start_to_hang_with_bounded_steps():
@@ -100,6 +217,11 @@ def test_resample_edge_cases_and_messages():
     # a repeated first point (zero-length first segment) is not a zero-length trajectory
     rep = np.array([[0.0, 0, 0], [0.0, 0, 0], [0.03, 0, 0]])
     assert resample(rep, 4)[:, 0] == pytest.approx([0, 0.01, 0.02, 0.03])
+    # the round trip through executed_path: the frames at the waypoints are skt_frames'
+    pos = resample(np.array([[0.0, 0, 0], [0.05, 0, 0], [0.08, 0.01, 0.04], [0.1, 0.0, 0.1]]), 9)
+    path = executed_path(pos, 0.001, 0.03)
+    hits = [int(np.argmin(np.linalg.norm(path[:, :3, 3] - p, axis=1))) for p in pos[::-1]]
+    np.testing.assert_allclose(path[hits], skt_frames(pos)[::-1], atol=1e-9)
     with pytest.raises(ValueError, match=r"^positions: zero-length trajectory$"):
         resample(np.zeros((3, 3)), 4)
     for bad in (two[:1], np.zeros((4, 4)), np.zeros(6)):

@@ -7,7 +7,7 @@ from skt_lib.geometry.convex import box, union
 from skt_lib.geometry.export import write_shape
 from skt_lib.geometry.se3 import pose_matrix, skt_rotation
 from skt_lib.planning.collision import MeshClearance
-from skt_lib.planning.trajectory import arc_length, resample, skt_frames
+from skt_lib.geometry.skt import arc_length, resample, skt_frames
 
 CUBE_HALF = 0.01
 # a 6 mm-thick plate at x = 0.2 with a 40 mm square hole: the only way from x < 0.2 to
@@ -37,22 +37,27 @@ def test_recheck_sees_a_collision_the_planner_would_see(tmp_path):
 
 
 def test_resample_keeps_endpoints_and_spaces_evenly():
+    """By arc length alone (``turn_radius_m=0``) waypoints are evenly spaced along the curve;
+    with turning, steps weigh travel plus turn (turning_length) evenly."""
     t = np.linspace(0, 1, 57)
     path = np.stack([np.cos(3 * t), np.sin(3 * t), t**2], axis=1) * 0.1
     for n in (10, 20, 40):
-        r = resample(path, n)
+        r = resample(path, n, turn_radius_m=0.0)
         assert r[0] == pytest.approx(path[0]) and r[-1] == pytest.approx(path[-1])
         s = arc_length(r)
         assert np.all(np.diff(s) > 0)  # monotone
         # equal spacing along the original curve (chords slightly shorter than arcs)
         assert np.diff(s) == pytest.approx(np.full(n - 1, arc_length(path)[-1] / (n - 1)), rel=0.02)
+        w = resample(path, n)
+        assert w[0] == pytest.approx(path[0]) and w[-1] == pytest.approx(path[-1])
+        assert np.all(np.diff(arc_length(w)) > 0)
     with pytest.raises(ValueError, match="n"):
         resample(path, 1)
     with pytest.raises(ValueError, match="zero-length"):
         resample(np.zeros((5, 3)), 4)
 
 
-def test_skt_frames_follow_the_rule():
+def test_skt_frames_are_orthonormal_and_anchored_at_the_rule():
     pos = np.array([[0.0, 0, 0], [0.05, 0, 0.01], [0.1, 0.02, 0.05], [0.1, 0.02, 0.1]])
     frames = skt_frames(pos)
     for i, f in enumerate(frames):
@@ -60,5 +65,5 @@ def test_skt_frames_follow_the_rule():
         assert r.T @ r == pytest.approx(np.eye(3), abs=1e-12) and np.linalg.det(r) == pytest.approx(1)
         assert f[:3, 3] == pytest.approx(pos[i])
     assert frames[0][:3, :3] == pytest.approx(skt_rotation(pos[0] - pos[1]))
-    # the last segment is vertical: its frame falls back to the nearest defined one
+    # the last waypoint (the start) takes the motion leaving it, without a further turn
     assert frames[3][:3, :3] == pytest.approx(frames[2][:3, :3])

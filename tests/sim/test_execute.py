@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from skt_lib.geometry.se3 import pose_matrix, transform_points
-from skt_lib.planning.trajectory import interpolate
+from skt_lib.geometry.skt import interpolate
 from skt_lib.sim.grasp import grasp_candidates, grasp_in_keypoint
 from skt_lib.sim.hanging import check_hang, perturb
 from skt_lib.sim.robot import IKFailure, Panda

@@ -83,7 +83,7 @@ def ring_scene(tmp_path_factory):
 
 def _choose(ring_scene, grasps, positions):
     from skt_lib.geometry.se3 import invert
-    from skt_lib.planning.trajectory import executed_path
+    from skt_lib.geometry.skt import executed_path
 
     support_urdf, ring_urdf, _ = ring_scene
     path = executed_path(positions, 0.002, scenes.RING_RADIUS_M)
