@@ -86,7 +86,7 @@ def _random_paths(seed: int, n: int):
 
 def test_fast_frames_equal_the_per_step_minimal_rotations_on_random_paths():
     n = 0
-    for p in _random_paths(0, 600):
+    for p in _random_paths(0, 300):
         try:
             fast = skt_frames(p)
         except ValueError:
@@ -99,7 +99,7 @@ def test_fast_frames_equal_the_per_step_minimal_rotations_on_random_paths():
         np.testing.assert_allclose(np.einsum("nji,njk->nik", r, r), np.broadcast_to(np.eye(3), r.shape),
                                    atol=1e-9)
         assert np.allclose(np.linalg.det(r), 1.0)
-    assert n > 500
+    assert n > 250
 
 
 def test_continuity_no_frame_step_larger_than_the_turn_of_the_motion():
@@ -135,19 +135,19 @@ def test_helix_roll_is_the_holonomy_of_its_closed_form():
     tangent's angle to the helix axis. The rule frame (y kept horizontal) comes back
     unrolled."""
     a, b = 0.05, 0.02
-    phi = np.linspace(0.0, 2 * np.pi, 20001)
+    phi = np.linspace(0.0, 2 * np.pi, 4001)
     pos = np.stack([a * np.cos(phi), a * np.sin(phi), b * phi], axis=1)[::-1]  # ξ_0: the top
     f = skt_frames(pos)
     cos_alpha = b / np.hypot(a, b)
     expected = 2 * np.pi * (1 - cos_alpha)
-    assert np.allclose(f[0, :3, 0], f[-1, :3, 0], atol=1e-3)  # the same tangent after one turn
+    assert np.allclose(f[0, :3, 0], f[-1, :3, 0], atol=3e-3)  # the same tangent after one turn
     y0, y1 = f[0, :3, 1], f[-1, :3, 1]
     roll = np.arctan2(np.dot(np.cross(y0, y1), f[0, :3, 0]), np.dot(y0, y1))
     wrap = lambda v: (v + np.pi) % (2 * np.pi) - np.pi  # noqa: E731
-    assert min(abs(wrap(roll - expected)), abs(wrap(roll + expected))) < 2e-3
+    assert min(abs(wrap(roll - expected)), abs(wrap(roll + expected))) < 5e-3
     assert abs(wrap(roll)) > 1.0  # and it is a real roll, not nothing
     rule = rule_frames(pos)
-    assert np.allclose(rule[0, :3, :3], rule[-1, :3, :3], atol=1e-3)
+    assert np.allclose(rule[0, :3, :3], rule[-1, :3, :3], atol=3e-3)
 
 
 def test_resample_puts_waypoints_where_the_object_turns():
