@@ -123,16 +123,23 @@ def build_review(data_root: str | Path, out: str | Path) -> dict[str, int]:
     stages = [s for s in REVIEW if (root / s / f"{s}.rrd").exists()]
     if not stages:
         raise FileNotFoundError(f"{root}: no stage recordings (run `make repro` first)")
+    picked = {s: representatives(item_labels(root / s / f"{s}.rrd", REVIEW[s][0]), REVIEW[s][1])
+              for s in stages}
+    longest = {}  # per item timeline: the most representatives any stage on it has
+    for s in stages:
+        longest[REVIEW[s][0]] = max(longest.get(REVIEW[s][0], 0), len(picked[s]))
     kept = {}
     with recording("review", out, "review", review_blueprint(stages)) as rec:
         for n, stage in enumerate(stages):
-            timeline, field, _, _ = REVIEW[stage]
+            timeline, times = REVIEW[stage][0], picked[stage]
             rrd = root / stage / f"{stage}.rrd"
-            times = representatives(item_labels(rrd, timeline), field)
             chunks, roots = _stage_chunks(rrd, stage, timeline, {t: i for i, t in enumerate(times)},
                                           (1 << 58) + n)
             rr.send_chunks(chunks, recording=rec)
-            for i in range(1, len(times)):  # one item at a time, as in the stage recording
+            # one item at a time, as in the stage recording; a stage with fewer
+            # representatives than another on its timeline clears its last one after it
+            last = len(times) + 1 if len(times) < longest[timeline] else len(times)
+            for i in range(1, last):
                 rec.reset_time()
                 rec.set_time(timeline, sequence=i)
                 for entity in sorted(roots.get(i - 1, ())):
