@@ -45,7 +45,7 @@ import numpy as np
 
 from skt_lib.errors import ItemFailure
 from skt_lib.geometry.se3 import skt_rotation
-from skt_lib.geometry.skt import arc_length, executed_path, minimal_rotation, resample, skt_frames
+from skt_lib.geometry.skt import executed_path, minimal_rotation, resample, skt_frames
 
 
 LIFT_STEP_M = 0.002
@@ -209,7 +209,7 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
     surface (drawn with ``surface_bias``). Raises :class:`ThreadingFailed`."""
     turn = np.radians(s.max_turn_deg)
     check = _Checker(collides, s)
-    sampler = _Sampler(in_start, sample_start, sample_near, lower, upper, s)
+    sampler = _Sampler(sample_start, sample_near, lower, upper, s)
     n_rejected = 0
     for lead, a0, r0 in _releases(goal[:3, 3], _unit(goal[:3, 0]), check, s):
         while True:  # fresh trees from this release until one survives resampling (one budget)
@@ -242,7 +242,6 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
 
 @dataclass(frozen=True)
 class _Sampler:
-    in_start: Callable
     sample_start: Callable
     sample_near: Callable | None
     lower: np.ndarray
@@ -440,7 +439,3 @@ def _shortcut(path: np.ndarray, frames: np.ndarray, check: _Checker, s: ThreadSe
         if new_frames is not None:
             path, frames = cand, new_frames
     return path
-
-
-def path_length(points: np.ndarray) -> float:
-    return float(arc_length(points)[-1])
