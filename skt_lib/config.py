@@ -258,6 +258,8 @@ class SimEvalParams(_Section):
         min_length=1, description="Grasp candidates: approach axis pitched down from keypoint +x, degrees, tried in this order.")
     grasp_rolls_deg: tuple[float, ...] = Field(
         min_length=1, description="Grasp candidates: roll of the hand about its approach axis, degrees (inner loop of the order).")
+    grasp_yaws_deg: tuple[float, ...] = Field(
+        min_length=1, description="Grasp candidates: the approach turned about keypoint +z from keypoint +x, degrees (90: from the side; outer loop of the order).")
     setup_clearance_m: float = Field(
         ge=0.0, le=0.02, description="Set-up: least robot–support, robot–wall and robot–object distance at the start pose, m.")
     step_m: float = Field(gt=0.0, le=0.002, description="Max object-point motion per command (≤ 2 mm).")
@@ -281,9 +283,10 @@ class SimEvalParams(_Section):
     def _grasps(self) -> "SimEvalParams":
         if any(not 0.0 <= a < 90.0 for a in self.grasp_pitch_deg):
             raise ValueError(f"grasp_pitch_deg: each pitch must lie in [0, 90) degrees, got {list(self.grasp_pitch_deg)}")
-        if any(not -180.0 <= a <= 180.0 for a in self.grasp_rolls_deg):
-            raise ValueError(f"grasp_rolls_deg: each roll must lie in [-180, 180] degrees, got {list(self.grasp_rolls_deg)}")
-        for key in ("grasp_pitch_deg", "grasp_rolls_deg", "methods"):
+        for key in ("grasp_rolls_deg", "grasp_yaws_deg"):
+            if any(not -180.0 <= a <= 180.0 for a in getattr(self, key)):
+                raise ValueError(f"{key}: each angle must lie in [-180, 180] degrees, got {list(getattr(self, key))}")
+        for key in ("grasp_pitch_deg", "grasp_rolls_deg", "grasp_yaws_deg", "methods"):
             values = getattr(self, key)
             if len(set(values)) != len(values):
                 raise ValueError(f"{key}: duplicate entries in {list(values)}")

@@ -24,6 +24,8 @@ def parse_args(stage: str, argv: Sequence[str] | None) -> argparse.Namespace:
     ap.add_argument("--data-dir", default=f"data/{stage}", help="artifact directory")
     ap.add_argument("--reports-dir", default=f"reports/{stage}", help="report directory")
     ap.add_argument("--data-root", default="data", help="where earlier stages' artifacts live")
+    ap.add_argument("--log-dir", default="logs",
+                    help="run log: wall-clock figures, not tracked by git or DVC (default: logs)")
     args = ap.parse_args(argv)
     args.stage = stage
     logging.basicConfig(level=logging.INFO, format=f"[{stage}] %(levelname)s %(message)s")

@@ -100,7 +100,7 @@ def cli_bench(root: Path) -> dict:
 def sim_bench(params, root: Path, per_level: int) -> dict:
     p = params.sim_eval
     supports, objects, _ = load_test_set(root, params.clustering.T, params.common.seed,
-                                         p.grasp_pitch_deg, p.grasp_rolls_deg)
+                                         p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg)
     chosen = [s for lv in LEVELS for s in [s for s in supports if s.difficulty == lv][:per_level]]
     settings = trial_settings(p, params.contact_sim)
     pre = np.asarray(p.kpam_pre_hang_m)

@@ -21,7 +21,7 @@ from skt_lib.io import remove_partial_writes, write_table
 from skt_lib.schemas import OBJECTS, SUPPORTS
 from stages._common import parse_args, run_items
 from viz.figures import Panel, bar_chart, mesh_gallery
-from viz.report import Report, write_metrics
+from viz.report import Report, write_metrics, write_run_log
 from viz.rerun_log import (SUPPORT_EYE, SUPPORT_LOOK_AT, ItemTimeline, item_blueprint, log_mesh,
                            object_path, recording, support_path)
 
@@ -106,11 +106,11 @@ def main(argv=None) -> int:
 
     report = Report("mesh_gen", rep)
     report.text(f"Seed {seed}; {len(supports)} supports and {len(real)} objects (+ the reference "
-                f"object) on {params.compute.n_workers} {params.compute.backend} worker(s).")
-    report.heading("Time")
-    report.table(["what", "wall s", "s per item"],
-                 [["supports", t_sup, t_sup / max(1, len(tasks))],
-                  ["objects", t_obj, t_obj / max(1, len(otasks))]])
+                f"object) on {params.compute.n_workers} {params.compute.backend} worker(s); wall-clock "
+                "times: the git-ignored run log `logs/mesh_gen.json`.")
+    write_run_log(Path(args.log_dir), "mesh_gen", {
+        "supports_wall_s": t_sup, "supports_s_per_item": t_sup / max(1, len(tasks)),
+        "objects_wall_s": t_obj, "objects_s_per_item": t_obj / max(1, len(otasks))})
     report.heading("Counts")
     report.table(["level", "all", "test"], [[lv, by_level[lv], test_level[lv]] for lv in LEVELS])
     report.table(["split", "supports"], [[k, v] for k, v in metrics["supports_by_split"].items()])

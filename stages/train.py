@@ -24,7 +24,7 @@ from skt_lib.learning.train import from_params, predict_items, summarise, train_
 from skt_lib.schemas import SUPPORTS
 from stages._common import parse_args
 from viz.figures import Panel, curves, mesh_gallery
-from viz.report import Report, write_metrics
+from viz.report import Report, write_metrics, write_run_log
 
 log = logging.getLogger("train")
 
@@ -75,9 +75,10 @@ def main(argv=None) -> int:
 
     report = Report("train", rep)
     report.text(f"SCTDN (k = {k}, T = {T}) trained {p.epochs} epochs × {p.views_per_epoch} views per "
-                f"training support ({len(train)} supports) in {wall / 60:.1f} min on "
-                f"{torch.get_num_threads()} CPU threads; best epoch chosen on {len(val)} validation "
-                f"supports × views {list(p.val_views)}.")
+                f"training support ({len(train)} supports) on {torch.get_num_threads()} CPU "
+                "threads (wall-clock times, the inference time and its torch.profiler breakdown: "
+                f"the git-ignored run log `logs/train.json`); best epoch chosen on {len(val)} "
+                f"validation supports × views {list(p.val_views)}.")
     report.table(["metric (best epoch)", "value", "unit"],
                  [[k2, v, _unit(k2)] for k2, v in best.items()])
     report.text("`train_*` are the training losses, averaged over the epoch: `train_traj` is the "
@@ -90,13 +91,14 @@ def main(argv=None) -> int:
            report.figure("train_loss.png", "Training losses (normalised cloud units, not mm)"),
            "training", "loss (normalised units)")
     _breakdown(report, model, val, p.val_views, root)
-    report.text(f"Inference (batch 1, {cfg.n_points} points in → SKT out, model loaded): median "
-                f"{1000 * np.median(times):.1f} ms (the benchmark's figure is "
-                f"reports/bench/bench.json). Curves: `dvc plots show` "
-                f"(reports/train/live/plots/metrics).")
-    report.heading("Where inference time goes (torch.profiler, 5 predictions)")
-    report.text("```\n" + profile + "\n```")
+    report.text("Curves: `dvc plots show` (reports/train/live/plots/metrics); inference speed: "
+                "`make bench` (reports/bench/bench.json).")
     report.write()
+    write_run_log(Path(args.log_dir), "train", {
+        "wall_s": wall, "threads": torch.get_num_threads(),
+        "inference_ms_median": 1000 * float(np.median(times)),
+        "inference_note": f"batch 1, {cfg.n_points} points in → SKT out, model loaded",
+        "profile_5_predictions": profile})
     return 0
 
 

@@ -27,7 +27,7 @@ from skt_lib.learning.train_baselines import train_vatmart, vatmart_config
 from skt_lib.learning.vatmart import VatMartPredictor
 from stages._common import parse_args
 from viz.figures import curves
-from viz.report import Report, write_metrics
+from viz.report import Report, write_metrics, write_run_log
 
 log = logging.getLogger("train_baselines")
 
@@ -65,7 +65,8 @@ def main(argv=None) -> int:
         metrics[name] = {**best, "best_epoch": int(np.argmin(curve)), "epochs": p.epochs}
         histories[name] = history
     write_metrics(rep, metrics)
-    _write_report(rep, metrics, histories, walls, len(train), len(val), p, n_prop)
+    _write_report(rep, metrics, histories, len(train), len(val), p, n_prop)
+    write_run_log(Path(args.log_dir), "train_baselines", {"wall_s": walls})
     return 0
 
 
@@ -75,14 +76,14 @@ def _replace(cfg, **kw):
     return replace(cfg, **kw)
 
 
-def _write_report(rep: Path, metrics: dict, histories: dict, walls: dict, n_train: int,
-                  n_val: int, p, n_prop: int) -> None:
+def _write_report(rep: Path, metrics: dict, histories: dict, n_train: int, n_val: int, p,
+                  n_prop: int) -> None:
     report = Report("train_baselines", rep)
     report.text(f"Learned baselines trained like SCTDN (`train`): {p.epochs} epochs × "
                 f"{p.views_per_epoch} views per training support ({n_train} supports), best epoch "
                 f"chosen on {n_val} validation supports × views {list(p.val_views)} "
-                "(never on training supports). Wall time: "
-                + ", ".join(f"{m} {w / 60:.1f} min" for m, w in walls.items()) + ".")
+                "(never on training supports); wall-clock times: the git-ignored run log "
+                "`logs/train_baselines.json`.")
     keys = sorted({k for m in metrics.values() for k in m if k.startswith("val_")})
     report.table(["model", *keys, "best epoch"],
                  [[m, *("–" if v.get(k) is None else v[k] for k in keys), v["best_epoch"]]

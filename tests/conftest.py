@@ -34,7 +34,7 @@ TINY = {
                  "n_proposals": 3, "omnihang_time_limit_s": 5.0,
                  "robot_base_m": [0.15, 0.0, 0.3], "linear_damping": 0.04, "angular_damping": 0.04,
                  "settle_linear_damping": 1.0, "settle_angular_damping": 5.0, "grasp_pitch_deg": [45.0, 30.0, 60.0],
-                 "grasp_rolls_deg": [0.0, 180.0], "setup_clearance_m": 0.002, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,
+                 "grasp_rolls_deg": [0.0, 180.0], "grasp_yaws_deg": [0.0], "setup_clearance_m": 0.002, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,
                  "track_tol_m": 0.02, "ik_tol_m": 0.002, "ik_tol_rad": 0.02, "max_joint_step_rad": 0.2,
                  "ik_restarts": 4, "grasp_force_n": 60.0, "retreat_m": 0.08, "retreat_steps": 60,
                  "kpam_pre_hang_m": [0.1, 0.0, 0.0], "kpam_lift_m": 0.01,
@@ -83,7 +83,10 @@ def tiny_dataset(tmp_path_factory):
                   affordance_maps, clustering, train, train_baselines):
         name = stage.__name__.rsplit(".", 1)[-1]
         assert stage.main(["--params", str(params), "--data-root", str(data),
-                           "--data-dir", str(data / name), "--reports-dir", str(reports / name)]) == 0
+                           "--data-dir", str(data / name), "--reports-dir", str(reports / name),
+                           "--log-dir", str(root / "logs")]) == 0
+    # wall-clock figures go to the run log, never into a report
+    assert {p.stem for p in (root / "logs").glob("*.json")} >= {"contact_sim", "render_views"}
     return params, data, reports
 
 
@@ -96,7 +99,7 @@ def tiny_evaluated(tiny_dataset, tmp_path_factory):
     root = tmp_path_factory.mktemp("sim_eval")
     out, rep = root / "data" / "sim_eval", root / "reports"
     assert sim_eval.main(["--params", str(params), "--data-root", str(data), "--data-dir", str(out),
-                          "--reports-dir", str(rep)]) == 0
+                          "--reports-dir", str(rep), "--log-dir", str(root / "logs")]) == 0
     return params, data, out, rep
 
 

@@ -49,6 +49,15 @@ class Report:
         return path
 
 
+def write_run_log(directory: str | Path, stage: str, entry: dict) -> Path:
+    """``<directory>/<stage>.json``: a run's wall-clock figures, kept out of what git and DVC
+    track (they change on every run)."""
+    path = Path(directory) / f"{stage}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(path, entry)
+    return path
+
+
 def write_metrics(directory: str | Path, metrics: dict) -> Path:
     path = Path(directory) / "metrics.json"
     write_json_atomic(path, metrics)

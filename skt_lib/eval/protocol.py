@@ -52,13 +52,13 @@ class TestObject:
     radius_m: float  # farthest object point from the keypoint
 
 
-def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_deg=(0.0,)
-                  ) -> tuple[list[TestSupport], list[TestObject], list[str]]:
+def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_deg=(0.0,),
+                  grasp_yaws_deg=(0.0,)) -> tuple[list[TestSupport], list[TestObject], list[str]]:
     """(test supports with a ground-truth SKT, test objects, ids of test supports without).
 
     Each object carries its grasp candidates (:func:`skt_lib.sim.grasp.grasp_candidates`)
-    for every pitch of ``grasp_pitch_deg`` × roll of ``grasp_rolls_deg`` (degrees; pass
-    ``sim_eval.grasp_pitch_deg`` and ``sim_eval.grasp_rolls_deg``), in that order."""
+    for every yaw of ``grasp_yaws_deg`` × pitch of ``grasp_pitch_deg`` × roll of
+    ``grasp_rolls_deg`` (degrees; pass ``sim_eval``'s), in that order."""
     pitches = (grasp_pitch_deg,) if np.isscalar(grasp_pitch_deg) else tuple(grasp_pitch_deg)
     mg = root / "mesh_gen"
     supports = read_table(mg / "supports.parquet", SUPPORTS)
@@ -85,7 +85,8 @@ def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_de
         k = pose_matrix(kp["position"], kp["quat"])
         (mesh,) = read_obj(mg / o.mesh_path)
         objs.append(TestObject(o.object_id, o.category, str(mg / o.urdf_path), str(mg / o.mesh_path),
-                               k, grasp_candidates(mesh.vertices, k, pitches, grasp_rolls_deg),
+                               k, grasp_candidates(mesh.vertices, k, pitches, grasp_rolls_deg,
+                                                                 yaws_deg=grasp_yaws_deg),
                                float(np.linalg.norm(mesh.vertices - k[:3, 3], axis=1).max())))
     return test, objs, missing
 

@@ -28,7 +28,7 @@ an undamped hung object keeps swinging) → predicate.
 Outcomes (``failure_reason``, empty on success; :data:`REASONS`):
 
 - ``ik_failed``: no reachable grasp at set-up (``detail`` says which check failed:
-  ``unreachable_start``, ``tracking_tolerance``, ``joint_jump``, or ``clearance``: the arm
+  ``unreachable_hang``, ``tracking_tolerance``, ``joint_jump``, or ``clearance``: the arm
   touches support or wall along the path, or the object at the start), or a tracking error above ``track_tol_m`` during execution with neither the
   object nor the robot touching support or wall;
 - ``collided_before_hang``: the object penetrates support or wall at the start pose, or a

@@ -1,13 +1,16 @@
 """Grasps (the paper's fixed keypoint→end-effector transform ``T_kpt_ee``) and the per-trial
 grasp chooser.
 
-A grasp candidate places the grasp target (between the fingertips) ``standoff_m`` behind
-(keypoint −x) the lowest ``band_m`` of the object as it hangs, with the approach axis (hand
-+z) along keypoint +x pitched down by ``pitch`` (the hand comes from behind and above) and
-the hand rolled by ``roll`` about that axis. Candidates come in a fixed order (pitch-major,
-as listed in params); :func:`choose_grasp` takes the first one for which the set-up IK finds
-a joint path along the whole executed path, with the arm clear of the support and the wall
-along it and clear of the object at the start.
+A grasp candidate approaches the lowest part of the object as it hangs: the approach axis
+(hand +z) is keypoint +x turned about keypoint +z by ``yaw`` (0: from behind, along the
+motion into the hang; ±90: from the side; 180: from in front), pitched down by ``pitch``
+(the hand comes from above), with the hand rolled by ``roll`` about that axis; the grasp
+target (between the fingertips) sits on the approach line through the lowest band, short of
+the object by a standoff, so that the hand behind it is clear of the object. Candidates
+come in a fixed order (yaw-major, then pitch, then roll, as listed in params);
+:func:`choose_grasp` takes the first one for which the set-up IK finds a joint path along
+the whole executed path, with the arm clear of the support and the wall along it and clear
+of the object at the start.
 """
 
 from collections import Counter
@@ -16,8 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from skt_lib.geometry.se3 import invert, transform_points
-from skt_lib.sim.robot import FINGER_OPEN_M, IKFailure, Panda
+from skt_lib.sim.robot import FINGER_OPEN_M, IKFailure, Panda, rank
 from skt_lib.sim.world import World
+
+#: Radius of the cylinder along the approach that the hand (palm, fingers) sweeps, m.
+HAND_RADIUS_M = 0.06
 
 
 @dataclass(frozen=True)
@@ -48,37 +54,49 @@ class GraspFailure:
     def describe(self) -> str:
         """One line: how many candidates failed each check, and the furthest failure."""
         counts = Counter(f.check for f in self.failures)
-        best = max(range(len(self.failures)), key=lambda i: (self.failures[i].index, -i))
+        best = max(range(len(self.failures)), key=lambda i: (rank(self.failures[i]), -i))
         return (f"no reachable grasp ({len(self.failures)} tried: "
                 + ", ".join(f"{n} {c}" for c, n in sorted(counts.items()))
                 + f"); furthest: {self.grasps[best].label} {self.failures[best].describe()}")
 
 
 def grasp_in_keypoint(vertices: np.ndarray, keypoint: np.ndarray, pitch_deg: float,
-                      roll_deg: float = 0.0, band_m: float = 0.02,
-                      standoff_m: float = 0.01) -> np.ndarray:
+                      roll_deg: float = 0.0, band_m: float = 0.02, standoff_m: float = 0.01,
+                      yaw_deg: float = 0.0, hand_radius_m: float = HAND_RADIUS_M) -> np.ndarray:
     """Grasp target pose (4×4) in the keypoint frame (module docstring).
 
     ``vertices (N, 3)``: object mesh, object frame, m; ``keypoint (4, 4)``: keypoint frame in
-    the object frame. Roll 0 keeps the hand's y axis along keypoint −y."""
+    the object frame. The approach (hand +z) is keypoint +x turned by ``yaw_deg`` about
+    keypoint +z (90: along +y, from the side; 180: along −x) and pitched down by
+    ``pitch_deg``. The grasp target lies on the approach line through the centre of the
+    lowest ``band_m`` of the object, ``standoff_m`` before the first object point within
+    ``hand_radius_m`` of that line, so the hand behind it is clear of the object. Roll 0 keeps
+    the hand's y axis along keypoint −y turned by the yaw."""
     v = transform_points(invert(keypoint), np.asarray(vertices, float))
-    low = v[v[:, 2] <= v[:, 2].min() + band_m]
-    p, r = np.radians(pitch_deg), np.radians(roll_deg)
-    pitched = np.array([[np.sin(p), 0.0, np.cos(p)], [0.0, -1.0, 0.0], [np.cos(p), 0.0, -np.sin(p)]])
+    centre = v[v[:, 2] <= v[:, 2].min() + band_m].mean(axis=0)
+    p, r, y = np.radians(pitch_deg), np.radians(roll_deg), np.radians(yaw_deg)
+    pitched = np.array([[np.sin(p), 0.0, np.cos(p)], [0.0, -1.0, 0.0],
+                        [np.cos(p), 0.0, -np.sin(p)]])
     rolled = np.array([[np.cos(r), -np.sin(r), 0.0], [np.sin(r), np.cos(r), 0.0], [0.0, 0.0, 1.0]])
+    yawed = np.array([[np.cos(y), -np.sin(y), 0.0], [np.sin(y), np.cos(y), 0.0], [0.0, 0.0, 1.0]])
+    rot = yawed @ pitched @ rolled
+    d = rot[:, 2]  # the approach
+    along = (v - centre) @ d
+    lateral = np.linalg.norm((v - centre) - along[:, None] * d, axis=1)
     t = np.eye(4)
-    t[:3, :3] = pitched @ rolled
-    t[:3, 3] = [low[:, 0].min() - standoff_m, low[:, 1].mean(), low[:, 2].mean()]
+    t[:3, :3] = rot
+    t[:3, 3] = centre + (float(along[lateral <= hand_radius_m].min(initial=0.0)) - standoff_m) * d
     return t
 
 
 def grasp_candidates(vertices: np.ndarray, keypoint: np.ndarray, pitches_deg, rolls_deg,
-                     band_m: float = 0.02, standoff_m: float = 0.01) -> tuple[Grasp, ...]:
-    """Every (pitch, roll) grasp, pitch-major in the given orders."""
+                     band_m: float = 0.02, standoff_m: float = 0.01,
+                     yaws_deg=(0.0,)) -> tuple[Grasp, ...]:
+    """Every (yaw, pitch, roll) grasp, yaw-major, then pitch, in the given orders."""
     return tuple(
-        Grasp(f"pitch{p:g}_roll{r:g}",
-              tuple(grasp_in_keypoint(vertices, keypoint, p, r, band_m, standoff_m).ravel()))
-        for p in pitches_deg for r in rolls_deg)
+        Grasp(f"pitch{p:g}_roll{r:g}" if y == 0 else f"yaw{y:g}_pitch{p:g}_roll{r:g}",
+              tuple(grasp_in_keypoint(vertices, keypoint, p, r, band_m, standoff_m, y).ravel()))
+        for y in yaws_deg for p in pitches_deg for r in rolls_deg)
 
 
 def choose_grasp(world: World, robot: Panda, path: np.ndarray, grasps: tuple[Grasp, ...],
@@ -95,16 +113,16 @@ def choose_grasp(world: World, robot: Panda, path: np.ndarray, grasps: tuple[Gra
         raise ValueError("grasps: no candidates")
     to_world = world.to_world
 
-    def clear(q: np.ndarray, bodies) -> bool:
+    def clear(q: np.ndarray, bodies, margin) -> bool:
         robot.reset(q, FINGER_OPEN_M)
-        return all(world.min_distance(robot.body, b) >= clearance_m for b in bodies)
+        return all(world.min_distance(robot.body, b) >= margin for b in bodies)
 
     def start_ok(q: np.ndarray) -> bool:
-        return clear(q, [*fixed, obj])
+        return clear(q, [*fixed, obj], clearance_m)
 
     def first_blocked(joints: np.ndarray) -> int:
         checked = [*range(0, len(joints), check_every), len(joints) - 1]
-        return next((k for k in checked if not clear(joints[k], fixed)), -1)
+        return next((k for k in checked if not clear(joints[k], fixed, clearance_m)), -1)
 
     failures = []
     for i, g in enumerate(grasps):

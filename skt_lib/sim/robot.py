@@ -2,15 +2,13 @@
 kinematics and joint position control of its grasp target (the point between the
 fingertips, link ``panda_grasptarget``). Its z axis is the approach direction.
 
-Set-up IK (:meth:`Panda.joint_path`) is PyBullet's null-space IK — limits, ranges and rest
-poses given for all 9 DoF (7 arm joints + 2 fingers; with fewer entries PyBullet silently
-falls back to plain IK) and the rest pose set to the previous solution, so that each solve
-stays in the basin of the one before — followed by a few rounds of plain damped least
-squares refinement (null-space IK alone leaves millimetres of error). Every result is
-clipped to the joint limits and checked by forward kinematics.
+Set-up IK (:meth:`Panda.joint_path`) uses :class:`skt_lib.sim.kinematics.Chain`, the arm's
+kinematics read from the same URDF: damped least squares with the joint limits as hard
+bounds, so a path that runs along a limit is tracked on it rather than clipped off it. A
+path is solved from its last pose — the hang, where the hand is most constrained — from
+several start configurations, and tracked backward pose by pose to the start.
 """
 
-import functools
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -21,6 +19,7 @@ import pybullet as pb
 import pybullet_data
 
 from skt_lib.geometry.se3 import matrix_pose, pose_matrix
+from skt_lib.sim.kinematics import Chain, IKSettings
 from skt_lib.sim.world import World
 
 PANDA_URDF = os.path.join(pybullet_data.getDataPath(), "franka_panda", "panda.urdf")
@@ -28,19 +27,23 @@ ARM = tuple(range(7))
 FINGERS = (9, 10)
 GRASP_LINK = 11
 FINGER_OPEN_M = 0.04
-#: Finger joint limits (prismatic, metres each), as in the URDF.
-FINGER_LIMITS_M = (0.0, 0.04)
+GRASP_LINK_NAME = "panda_grasptarget"
 #: The first IK start: elbow up, hand forward.
 REST_Q = (0.0, -0.4, 0.0, -2.2, 0.0, 1.8, 0.785)
+#: Solving one pose from a start configuration far away / tracking from the previous pose.
+GLOBAL_IK = IKSettings(max_iterations=100)
+TRACK_IK = IKSettings(max_iterations=20, rest_gain=0.05)
+#: Set-up checks a path at every this many poses first, then at every pose.
+COARSE_STRIDE = 8
 
-IKCheck = Literal["unreachable_start", "tracking_tolerance", "joint_jump", "clearance"]
+IKCheck = Literal["unreachable_hang", "tracking_tolerance", "joint_jump", "clearance"]
 
 
 @dataclass(frozen=True)
 class IKFailure:
     """Why :meth:`Panda.joint_path` found no joint path: the first check that failed on the
-    start configuration that got furthest. ``index`` is the pose (0-based, of ``n_poses``)
-    where it failed; ``error_m``/``error_rad`` the grasp-target error there, ``jump_rad`` the
+    start configuration that got furthest. ``index`` is the pose (0-based, of ``n_poses``,
+    execution order; the last is the hang) where it failed; ``error_m``/``error_rad`` the grasp-target error there, ``jump_rad`` the
     largest joint change into it (0 when not computed)."""
 
     check: IKCheck
@@ -55,28 +58,19 @@ class IKFailure:
                 f"{self.error_rad:.3f} rad, jump {self.jump_rad:.3f} rad)")
 
 
-def _pos_quat(t: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Position and xyzw quaternion of a 4×4 pose (memoised: each set-up target is handed to
-    PyBullet's IK several times)."""
-    return _pos_quat_of_bytes(np.ascontiguousarray(t, dtype=np.float64).tobytes())
+_STAGE = {"unreachable_hang": 0, "tracking_tolerance": 1, "joint_jump": 1, "clearance": 2}
 
 
-@functools.lru_cache(maxsize=64)
-def _pos_quat_of_bytes(key: bytes) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    pos, quat = matrix_pose(np.frombuffer(key, dtype=np.float64).reshape(4, 4))
-    return tuple(map(float, pos)), tuple(map(float, quat))
-
-
-def _rank(f: IKFailure) -> tuple[int, bool]:
-    """How far a failed seed got (a start that was reached but not clear beats none)."""
-    return f.index, f.check != "unreachable_start"
+def rank(f: IKFailure) -> tuple[int, int]:
+    """How far a failed start configuration got: tracked to the start but not clear, beats
+    tracked part of the way (the fewer poses left the better), beats an unreachable hang."""
+    return _STAGE[f.check], -f.index
 
 
 class Panda:
     """One Panda in ``world`` with its base at ``base_world`` (4×4, world frame)."""
 
-    def __init__(self, world: World, base_world: np.ndarray, ns_iterations: int = 20,
-                 refine_rounds: int = 3):
+    def __init__(self, world: World, base_world: np.ndarray):
         self.cid = world.cid
         pos, quat = matrix_pose(base_world)
         self.body = pb.loadURDF(PANDA_URDF, pos, quat, useFixedBase=True, physicsClientId=self.cid)
@@ -84,15 +78,11 @@ class Panda:
         self.lower = np.array([i[8] for i in info])
         self.upper = np.array([i[9] for i in info])
         self.max_force = [i[10] for i in info]
-        # one entry per DoF (movable joint) of the URDF: 7 arm joints, then the 2 fingers
-        n_dof = sum(pb.getJointInfo(self.body, j, physicsClientId=self.cid)[2] != pb.JOINT_FIXED
-                    for j in range(pb.getNumJoints(self.body, physicsClientId=self.cid)))
-        if n_dof != 9:
-            raise RuntimeError(f"{PANDA_URDF}: expected 9 degrees of freedom, found {n_dof}")
-        self._ll = [*self.lower, *(FINGER_LIMITS_M[0],) * 2]
-        self._ul = [*self.upper, *(FINGER_LIMITS_M[1],) * 2]
-        self._jr = [u - lo for u, lo in zip(self._ul, self._ll)]
-        self.ns_iterations, self.refine_rounds = ns_iterations, refine_rounds
+        self.chain = Chain(PANDA_URDF, GRASP_LINK_NAME, base_world)
+        self.mid = (self.lower + self.upper) / 2.0  # tracking drifts toward mid-range
+        if not (np.array_equal(self.chain.lower, self.lower)
+                and np.array_equal(self.chain.upper, self.upper)):
+            raise RuntimeError(f"{PANDA_URDF}: the kinematic chain's limits differ from PyBullet's")
         self.n_links = pb.getNumJoints(self.body, physicsClientId=self.cid)
         self.reset(REST_Q, FINGER_OPEN_M)
 
@@ -127,38 +117,9 @@ class Panda:
 
     # -- kinematics and control --------------------------------------------
     def ik(self, target_world: np.ndarray) -> np.ndarray:
-        """Joint positions (7,) that put the grasp target at ``target_world``, searched from
-        the current joint state (PyBullet's plain damped least squares), clipped to the limits.
-        Does not move the arm."""
-        pos, quat = _pos_quat(target_world)
-        q = pb.calculateInverseKinematics(self.body, GRASP_LINK, pos, quat, maxNumIterations=100,
-                                          residualThreshold=1e-5, physicsClientId=self.cid)
-        return np.clip(np.asarray(q[:7]), self.lower, self.upper)
-
-    def ik_nullspace(self, target_world: np.ndarray, rest_q) -> np.ndarray:
-        """Null-space IK (7,) from the current joint state, pulled toward ``rest_q`` (7,),
-        within the joint limits (9-entry arrays: arm + fingers). Does not move the arm."""
-        pos, quat = _pos_quat(target_world)
-        q = pb.calculateInverseKinematics(
-            self.body, GRASP_LINK, pos, quat, lowerLimits=self._ll, upperLimits=self._ul,
-            jointRanges=self._jr, restPoses=[*map(float, rest_q), FINGER_OPEN_M, FINGER_OPEN_M],
-            maxNumIterations=self.ns_iterations, residualThreshold=1e-6, physicsClientId=self.cid)
-        return np.clip(np.asarray(q[:7]), self.lower, self.upper)
-
-    def solve(self, target_world: np.ndarray, rest_q, tol_m: float = 1e-4,
-              tol_rad: float = 1e-3) -> np.ndarray:
-        """Null-space IK toward ``rest_q``, then up to ``refine_rounds`` rounds of plain IK
-        until the grasp target is within ``tol_m``/``tol_rad`` of ``target_world``. Leaves
-        the arm (teleported) at the result, which it returns (7,), inside the limits."""
-        q = self.ik_nullspace(target_world, rest_q)
-        self.reset(q, FINGER_OPEN_M)
-        for _ in range(self.refine_rounds):
-            d, a = self.pose_error(target_world)
-            if d <= tol_m and a <= tol_rad:
-                break
-            q = self.ik(target_world)
-            self.reset(q, FINGER_OPEN_M)
-        return q
+        """Joint positions (7,) inside the limits that put the grasp target at
+        ``target_world``, searched from the current joint state. Does not move the arm."""
+        return self.chain.solve(target_world, self.q(), settings=TRACK_IK)[0]
 
     def start_seeds(self, n: int) -> list[np.ndarray]:
         """IK start configurations: :data:`REST_Q`, then ``n − 1`` fixed pseudo-random ones
@@ -169,60 +130,75 @@ class Panda:
     def joint_path(self, targets: list[np.ndarray], tol_m: float, tol_rad: float,
                    max_jump_rad: float, restarts: int,
                    accept_start: Callable[[np.ndarray], bool] | None = None,
-                   first_blocked: Callable[[np.ndarray], int] | None = None) -> np.ndarray | IKFailure:
+                   first_blocked: Callable[[np.ndarray], int] | None = None
+                   ) -> np.ndarray | IKFailure:
         """Set-up (kinematic, before a trial): joint positions ``(M, 7)`` that put the grasp
-        target on every pose of ``targets`` (M world poses, 4×4) within ``tol_m``/``tol_rad``,
-        each within ``max_jump_rad`` (every joint) of the previous one.
+        target on every pose of ``targets`` (M world poses, 4×4, execution order) within
+        ``tol_m``/``tol_rad``, each within ``max_jump_rad`` (every joint) of the previous one.
 
-        The first pose is solved from each of :meth:`start_seeds` in order (rest pose = the
-        seed); every later pose is solved from, and pulled toward, the previous solution.
-        A start configuration that ``accept_start(q (7,))`` rejects (e.g. a collision at the
-        set-up pose) fails as ``clearance``, and so does a tracked path ``(M, 7)`` for which
-        ``first_blocked(path)`` returns a pose index ≥ 0 (e.g. the arm through the support).
-        Returns the path of the first seed that tracks all of ``targets``, else the
-        :class:`IKFailure` of the seed that got furthest. Leaves the arm at the path's start
-        (at the last configuration tried on failure)."""
+        The last pose (the hang) is solved from each of :meth:`start_seeds` in order; every
+        earlier pose is solved from the solution of the pose after it. A tracked path whose
+        first configuration ``accept_start(q (7,))`` rejects (e.g. a collision at the set-up
+        pose) fails as ``clearance``, and so does one for which ``first_blocked(path)``
+        returns a pose index ≥ 0 (e.g. the arm through the support). Returns the path of the
+        first seed that passes, else the :class:`IKFailure` of the seed that got furthest.
+        Leaves the arm at the path's start (at the last configuration tried on failure)."""
         n = len(targets)
         worst: IKFailure | None = None
-        starts: list[np.ndarray] = []
+        ends: list[np.ndarray] = []
         for seed in self.start_seeds(restarts):
-            self.reset(seed, FINGER_OPEN_M)
-            q0 = self.solve(targets[0], seed)
-            d, a = self.pose_error(targets[0])
+            q_end, d, a = self.chain.solve(targets[-1], seed, settings=GLOBAL_IK)
             if d > tol_m or a > tol_rad:
-                fail = IKFailure("unreachable_start", 0, n, d, a)
-            elif any(np.abs(q0 - s).max() < 1e-3 for s in starts):
-                continue  # the same start as a seed tried before: the same path
-            elif accept_start is not None and not accept_start(q0):
-                starts.append(q0)
-                fail = IKFailure("clearance", 0, n, d, a)
+                fail = IKFailure("unreachable_hang", n - 1, n, d, a)
+            elif any(np.abs(q_end - e).max() < 1e-3 for e in ends):
+                continue  # the same hang configuration as a seed tried before: the same path
             else:
-                starts.append(q0)
-                fail, path = self._track(targets, q0, tol_m, tol_rad, max_jump_rad)
-                if fail is None and first_blocked is not None:
-                    k = first_blocked(path)
-                    if k >= 0:
-                        fail = IKFailure("clearance", k, n)
+                ends.append(q_end)
+                fail, path = self._checked_path(targets, q_end, tol_m, tol_rad, max_jump_rad,
+                                                accept_start, first_blocked)
                 if fail is None:
                     self.reset(path[0], FINGER_OPEN_M)
                     return path
-            if worst is None or _rank(fail) > _rank(worst):
+            if worst is None or rank(fail) > rank(worst):
                 worst = fail
         assert worst is not None
         return worst
 
-    def _track(self, targets, q0, tol_m, tol_rad, max_jump_rad):
-        path = [q0]
-        for k, target in enumerate(targets[1:], start=1):
-            q = self.solve(target, path[-1])
-            d, a = self.pose_error(target)
+    def _checked_path(self, targets, q_end, tol_m, tol_rad, max_jump_rad, accept_start,
+                      first_blocked):
+        """Track from ``q_end`` and check, first every :data:`COARSE_STRIDE`-th pose (a cheap
+        filter: most candidates fail on it), then every pose: ``(None, path (M, 7))`` or
+        ``(IKFailure, None)``."""
+        n = len(targets)
+        for stride in (COARSE_STRIDE, 1):
+            fail, path, index = self._track(targets, q_end, tol_m, tol_rad,
+                                            stride * max_jump_rad, stride)
+            if fail is None and accept_start is not None and not accept_start(path[0]):
+                fail = IKFailure("clearance", 0, n)
+            if fail is None and first_blocked is not None:
+                k = first_blocked(path)
+                if k >= 0:
+                    fail = IKFailure("clearance", index[k], n)
+            if fail is not None:
+                return fail, None
+        return None, path
+
+    def _track(self, targets, q_end, tol_m, tol_rad, max_jump_rad, stride=1):
+        """Track every ``stride``-th pose of ``targets`` (and the first) backward from
+        ``q_end`` at the last: ``(None, path (K, 7), pose indices (K,))`` in execution order,
+        or ``(IKFailure, None, None)`` at the first pose that fails."""
+        n = len(targets)
+        index = [*range(n - 1, 0, -stride), 0] if n > 1 else [0]
+        path = [q_end]
+        for k in index[1:]:
+            q, d, a = self.chain.solve(targets[k], path[-1], self.mid, settings=TRACK_IK)
             jump = float(np.abs(q - path[-1]).max())
             if d > tol_m or a > tol_rad:
-                return IKFailure("tracking_tolerance", k, len(targets), d, a, jump), None
+                return IKFailure("tracking_tolerance", k, n, d, a, jump), None, None
             if jump > max_jump_rad:
-                return IKFailure("joint_jump", k, len(targets), d, a, jump), None
+                return IKFailure("joint_jump", k, n, d, a, jump), None, None
             path.append(q)
-        return None, np.stack(path)
+        return None, np.stack(path[::-1]), index[::-1]
 
     def pose_error(self, target_world: np.ndarray) -> tuple[float, float]:
         """(position error m, rotation error rad) of the grasp target against a target."""

@@ -30,7 +30,7 @@ def _trials():
 
 def _metrics(trials):
     table, ci = success_table(trials), success_ci95(trials, LEVELS)
-    m = {k: {"success": table[k], "n_trials": 40, "inference_ms": 1.0, "success_ci95": ci[k],
+    m = {k: {"success": table[k], "n_trials": 40, "success_ci95": ci[k],
              "failures_by_reason": {r: int(((trials["method"] == k) &
                                             (trials["failure_reason"] == r)).sum())
                                     for r in REASONS}} for k in METHODS}
@@ -45,13 +45,12 @@ def test_report_shows_intervals_and_paired_verdicts(tmp_path):
     assert set(metrics["paired"]) == {"sctdn_vs_oracle_floating", "sctdn_vs_template_only",
                                       "sctdn_vs_kpam"}
     assert metrics["sctdn"]["success_ci95"]["hard"] is None  # no hard supports here
-    _write_report(tmp_path, trials, trials, metrics, METHODS, [None] * 8, [None] * 5, [], 60.0,
-                  [])
+    _write_report(tmp_path, trials, trials, metrics, METHODS, [None] * 8, [None] * 5, [], [])
     text = (tmp_path / "report.md").read_text()
     # Table I: sctdn 36/40 = 90.0 %, Wilson [76.9–96.0]
     lo, hi = metrics["sctdn"]["success_ci95"]["all"]
     assert (lo, hi) == (pytest.approx(0.7694, abs=5e-4), pytest.approx(0.9604, abs=5e-4))
-    assert "| sctdn | 1.00 | 90.0 [76.9–96.0] |" in text
+    assert "| sctdn | 90.0 [76.9–96.0] |" in text
     assert "100.0 [91.2–100.0]" in text  # oracle_floating 40/40
     # per category: sctdn on mugs = 16/20 → 80.0 [58.4–91.9]
     assert "80.0 [58.4–91.9]" in text

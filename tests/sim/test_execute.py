@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from skt_lib.geometry.se3 import pose_matrix, transform_points
 from skt_lib.geometry.skt import interpolate
-from skt_lib.sim.grasp import grasp_candidates, grasp_in_keypoint
+from skt_lib.sim.grasp import HAND_RADIUS_M, grasp_candidates, grasp_in_keypoint
 from skt_lib.sim.hanging import check_hang, perturb
 from skt_lib.sim.robot import IKFailure, Panda
 from tests.sim.test_hanging import PERT, _ring_world, _settle_from
@@ -40,29 +40,46 @@ def test_interpolation_moves_no_point_more_than_the_step():
     assert len(interpolate(frames, 2 * step, radius)) < 0.6 * len(path)
 
 
-@pytest.mark.parametrize("pitch,roll", [(0.0, 0.0), (30.0, 0.0), (45.0, 180.0), (60.0, -30.0)])
-def test_grasp_is_behind_the_lowest_part_and_approaches_along_keypoint_x(pitch, roll):
+@pytest.mark.parametrize("yaw,pitch,roll", [(0.0, 0.0, 0.0), (0.0, 30.0, 0.0), (0.0, 45.0, 180.0),
+                                            (0.0, 60.0, -30.0), (90.0, 30.0, 0.0),
+                                            (-90.0, 45.0, 90.0), (180.0, 60.0, 0.0)])
+def test_grasp_approaches_the_lowest_part_with_the_hand_clear_of_the_object(yaw, pitch, roll):
     rng = np.random.default_rng(1)
-    verts = rng.uniform([-0.02, -0.03, -0.12], [0.02, 0.03, 0.01], size=(500, 3))
+    # an L-shaped object: a long arm sticks out sideways above the lowest part, so a hand
+    # placed only by the lowest band would sit inside it for some approaches
+    verts = np.concatenate([rng.uniform([-0.02, -0.03, -0.12], [0.02, 0.03, 0.01], size=(500, 3)),
+                            rng.uniform([-0.12, -0.12, -0.09], [0.12, 0.12, -0.07], size=(500, 3))])
     keypoint = pose_matrix([0.0, 0.0, 0.01], Rotation.from_euler("z", 30, degrees=True).as_quat())
-    g = grasp_in_keypoint(verts, keypoint, pitch, roll, band_m=0.02, standoff_m=0.01)
+    g = grasp_in_keypoint(verts, keypoint, pitch, roll, band_m=0.02, standoff_m=0.01, yaw_deg=yaw)
     r = g[:3, :3]
     assert np.allclose(r.T @ r, np.eye(3)) and np.linalg.det(r) == pytest.approx(1.0)
-    p, q = np.radians(pitch), np.radians(roll)
-    assert np.allclose(r[:, 2], [np.cos(p), 0, -np.sin(p)])  # approach: keypoint +x, pitched down
-    # roll turns the hand's y axis about the approach: roll 0 → keypoint −y
-    assert np.dot(r[:, 1], [0, -1, 0]) == pytest.approx(np.cos(q))
+    p, q, y = np.radians(pitch), np.radians(roll), np.radians(yaw)
+    # approach: keypoint +x turned by the yaw about keypoint z, pitched down
+    assert np.allclose(r[:, 2], [np.cos(p) * np.cos(y), np.cos(p) * np.sin(y), -np.sin(p)])
+    # roll turns the hand's y axis about the approach: roll 0 → keypoint −y turned by the yaw
+    assert np.dot(r[:, 1], [np.sin(y), -np.cos(y), 0]) == pytest.approx(np.cos(q))
     v = transform_points(np.linalg.inv(keypoint), verts)
-    low = v[v[:, 2] <= v[:, 2].min() + 0.02]
-    assert g[0, 3] == pytest.approx(low[:, 0].min() - 0.01)
-    assert v[:, 2].min() <= g[2, 3] <= v[:, 2].min() + 0.02
+    centre = v[v[:, 2] <= v[:, 2].min() + 0.02].mean(axis=0)
+    d = r[:, 2]
+    rel = g[:3, 3] - centre
+    assert np.linalg.norm(rel - (rel @ d) * d) < 1e-12  # on the approach line through the band
+    # every object point within the hand's radius of that line is ≥ the standoff ahead of
+    # the fingertips, and one is exactly at it
+    along = (v - g[:3, 3]) @ d
+    lateral = np.linalg.norm((v - g[:3, 3]) - along[:, None] * d, axis=1)
+    near = along[lateral <= HAND_RADIUS_M]
+    assert near.min() == pytest.approx(0.01)
 
 
-def test_grasp_candidates_come_pitch_major_in_the_given_order():
+def test_grasp_candidates_come_yaw_major_then_pitch_in_the_given_order():
     verts = np.random.default_rng(2).uniform(-0.05, 0.05, size=(200, 3))
     c = grasp_candidates(verts, np.eye(4), (45.0, 30.0), (0.0, 180.0))
-    assert [g.label for g in c] == ["pitch45_roll0", "pitch45_roll180", "pitch30_roll0", "pitch30_roll180"]
+    assert [g.label for g in c] == ["pitch45_roll0", "pitch45_roll180", "pitch30_roll0",
+                                    "pitch30_roll180"]
     assert np.allclose(c[2].matrix(), grasp_in_keypoint(verts, np.eye(4), 30.0, 0.0))
+    c = grasp_candidates(verts, np.eye(4), (45.0,), (0.0,), yaws_deg=(0.0, 90.0, -90.0))
+    assert [g.label for g in c] == ["pitch45_roll0", "yaw90_pitch45_roll0", "yaw-90_pitch45_roll0"]
+    assert np.allclose(c[1].matrix(), grasp_in_keypoint(verts, np.eye(4), 45.0, 0.0, yaw_deg=90.0))
 
 
 def test_predicate_rejects_an_object_still_in_the_gripper(tmp_path):

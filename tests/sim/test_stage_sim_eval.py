@@ -32,7 +32,7 @@ def test_metrics_contract_matches_the_trials_table(evaluated):
     assert n_pairs > 0
     for m in METHODS:
         entry, rows = metrics[m], trials[trials["method"] == m]
-        assert set(entry) >= {"success", "n_trials", "inference_ms"}
+        assert set(entry) >= {"success", "n_trials"} and "inference_ms" not in entry
         assert set(entry["success"]) == {"all", *LEVELS}
         assert entry["n_trials"] == len(rows) == n_pairs
         assert entry["success"]["all"] == pytest.approx(rows["success"].mean())
@@ -45,8 +45,13 @@ def test_metrics_contract_matches_the_trials_table(evaluated):
             assert rate == (pytest.approx(sub["success"].mean()) if len(sub) else None)
         assert {c for c, r in entry["success_by_category"].items() if r is not None} == set(
             rows["category"])
-    # timings are measured, not filled in: a network forward pass costs more than a lookup
-    assert metrics["sctdn"]["inference_ms"] > 10 * metrics["oracle"]["inference_ms"] > 0
+    # wall-clock figures go to the run log, not to what git and DVC track; they are measured,
+    # not filled in: a network forward pass costs more than a lookup
+    timing = json.loads((rep.parent / "logs" / "sim_eval.json").read_text())
+    ms = timing["inference_ms_median"]
+    assert ms["sctdn"] > 10 * ms["oracle"] > 0 and ms["omnihang"] > 0
+    assert timing["n_trials"] == len(trials) and timing["wall_s"] > 0
+    assert "min" not in (rep / "report.md").read_text().split("\n")[2]
     # a failure has exactly one documented reason, a success none
     assert ((trials["failure_reason"] == "") == trials["success"]).all()
     # the floating hand runs the oracle's SKT: same trials, never an arm failure
@@ -61,7 +66,7 @@ def test_metrics_contract_matches_the_trials_table(evaluated):
     assert set(trials.loc[~trials["success"], "failure_reason"]) <= set(REASONS)
     _check_proposals(metrics, trials, load_params(params).sim_eval.n_proposals, n_pairs)
     o = metrics["omnihang"]
-    assert 0.0 <= o["plan_solved_rate"] <= 1.0 and o["inference_ms"] > 0
+    assert 0.0 <= o["plan_solved_rate"] <= 1.0
     assert o["n_trials"] == n_pairs
     assert (out / "sim_eval.rrd").stat().st_size > 10_000
     text = (rep / "report.md").read_text()
@@ -97,7 +102,7 @@ def test_trials_repeat_exactly_whatever_ran_before(evaluated):
     params_path, data, _, _ = evaluated
     p = load_params(params_path)
     supports, objects, _ = load_test_set(data, p.clustering.T, p.common.seed, p.sim_eval.grasp_pitch_deg,
-                                         p.sim_eval.grasp_rolls_deg)
+                                         p.sim_eval.grasp_rolls_deg, p.sim_eval.grasp_yaws_deg)
     settings = trial_settings(p.sim_eval, p.contact_sim)
     s, o = supports[0], objects[0]
     oracle = make_method("oracle", None, s.gt, np.asarray(p.sim_eval.kpam_pre_hang_m)).predict(s.cloud)

@@ -54,7 +54,7 @@ def check_release_far_from_support(scene, run=None):
 def check_unreachable(scene, run=None):
     row = _row(scene, scenes.straight_skt(offset=(0.0, 1.5, 0.0)), run)
     assert row["failure_reason"] == "ik_failed" and row["n_executed"] == 0, row
-    assert "unreachable_start" in row["detail"] and row["grasp"] == ""
+    assert "unreachable_hang" in row["detail"] and row["grasp"] == ""
 
 
 def check_tracking_without_contact(scene, run=None):
