@@ -31,6 +31,8 @@ $(STAMP): pyproject.toml
 repro: $(STAMP)
 	@# stages run `python -m stages.<name>`: put the venv first on PATH.
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro
+	@# Table I and the other run figures of README.md and docs/ from the new reports
+	$(BIN)/python -m tools.docs_results
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
@@ -39,6 +41,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	@# speed figures into reports/bench/bench.json; needs the artifacts of `make repro`
 	$(BIN)/python -m stages.bench
+	$(BIN)/python -m tools.docs_results
 
 review: $(STAMP)
 	@# data/review/review.rrd (representative items of every stage, one tab each) and

@@ -1,0 +1,228 @@
+"""Write the figures a run produced into README.md and docs/*.md, from the committed reports.
+
+Every such figure sits in a block between ``<!-- NAME:start -->`` and ``<!-- NAME:end -->``
+and is written here from ``reports/sim_eval/metrics.json`` and ``reports/bench/bench.json``;
+nothing between the markers is typed by hand. The last step of ``make repro`` and
+``make bench``; ``tests/test_docs.py`` checks that the committed blocks are current.
+
+    .venv/bin/python -m tools.docs_results           # rewrite the blocks in place
+    .venv/bin/python -m tools.docs_results --check   # exit 1, with a diff, if one is stale
+"""
+
+import argparse
+import difflib
+import json
+import sys
+from pathlib import Path
+
+from skt_lib.config import METHODS
+
+ROOT = Path(__file__).resolve().parents[1]
+METRICS = Path("reports/sim_eval/metrics.json")
+BENCH = Path("reports/bench/bench.json")
+
+LEVELS = (("all", "All"), ("easy", "Easy"), ("normal", "Normal"), ("hard", "Hard"),
+          ("very_hard", "Very Hard"))
+
+# bench.json: key -> (format of the value with its unit, meaning). Every key the bench
+# writes has a row here (tests/test_docs.py checks it); the bench's sample sizes go into
+# the sentence above the table.
+BENCH_ROWS = {
+    "rrt_plan_s_median": ("{:.2f} s", "planning time per SKT attempt (one process per support)"),
+    "rrt_recheck_s_median": ("{:.2f} s", "independent re-check time per SKT"),
+    "rrt_skts_per_min": ("{:.0f}", "SKTs planned and re-checked per minute of wall time, "
+                                   "`compute.n_workers` workers"),
+    "render_ms_per_view_median": ("{:.1f} ms", "ray casting of one view (Open3D), one process"),
+    "render_total_ms_per_view_median": ("{:.1f} ms", "the whole view: ray casting, farthest-"
+                                                     "point sampling to N, shuffle, NPZ write; "
+                                                     "one process"),
+    "sctdn_inference_ms_median": ("{:.1f} ms", "SCTDN, batch 1, one rendered view in → SKT out, "
+                                               "model loaded; median of 100 after 10 warm-up"),
+    "cli_predict_ms_median": ("{:.0f} ms", "`skt predict`'s prediction of a 1000-point view: "
+                                           "cleaning, sampling, SCTDN; model loaded, process start "
+                                           "excluded; median of 30 after 3 warm-up"),
+    "sim_trials_per_min": ("{:.0f}", "`sim_eval` trials (Panda, oracle SKTs, every test object) "
+                                     "per minute of wall time, `compute.n_workers` workers"),
+}
+BENCH_SAMPLE = ("machine", "rrt_bench_supports", "rrt_bench_skts", "sim_bench_trials")
+
+PAPER_SKTS = 472 * 50  # the paper preset of docs/presets.md: supports × SKTs per support
+
+
+class DocsError(Exception):
+    """An expected failure: a missing report or marker. The message names the file."""
+
+
+def load_reports(root: Path = ROOT) -> dict:
+    """``{"metrics": sim_eval's metrics.json, "bench": bench.json}`` under ``root``."""
+    out = {}
+    for key, rel in (("metrics", METRICS), ("bench", BENCH)):
+        path = root / rel
+        if not path.is_file():
+            raise DocsError(f"{rel}: not found (written by `make repro` / `make bench`)")
+        try:
+            out[key] = json.loads(path.read_text())
+        except json.JSONDecodeError as err:
+            raise DocsError(f"{rel}: not valid JSON: {err}") from None
+    return out
+
+
+def _pct(value: float | None) -> str:
+    return "–" if value is None else f"{100 * value:.1f}"
+
+
+def table_methods(metrics: dict) -> list[str]:
+    """Methods with a ``success`` dict: the order of ``sim_eval.methods`` (the paper's
+    Table I), then any other in the file's order."""
+    present = [m for m, v in metrics.items()
+               if isinstance(v, dict) and isinstance(v.get("success"), dict)]
+    return [m for m in METHODS if m in present] + [m for m in present if m not in METHODS]
+
+
+def table_one(metrics: dict) -> str:
+    """Table I: success rate (%) per method and difficulty level; "–" where undefined."""
+    lines = []
+    if "n_test_supports" in metrics and "n_test_objects" in metrics:
+        lines += [f"Success rate (%) on {metrics['n_test_supports']} test supports × "
+                  f"{metrics['n_test_objects']} test objects, one trial per pair and method.", ""]
+    lines += ["| method | " + " | ".join(title for _, title in LEVELS) + " |",
+              "|---" * (len(LEVELS) + 1) + "|"]
+    for m in table_methods(metrics):
+        success = metrics[m]["success"]
+        lines.append(f"| `{m}` | " + " | ".join(_pct(success.get(k)) for k, _ in LEVELS) + " |")
+    return "\n".join(lines)
+
+
+def sim_size(metrics: dict) -> str:
+    """How many trials the committed evaluation simulated."""
+    methods = table_methods(metrics)
+    pairs = sum(metrics[m].get("n_trials", 0) for m in methods)
+    runs = sum(metrics[m].get("n_sim_runs", metrics[m].get("n_trials", 0)) for m in methods)
+    proposing = [m for m in methods
+                 if metrics[m].get("n_sim_runs", 0) > metrics[m].get("n_trials", 0)]
+    text = (f"`sim_eval` simulated {runs} trials: {pairs} first trials ({len(methods)} methods, "
+            "one per (support, object) pair each)")
+    if proposing:
+        names = ", ".join(f"`{m}`" for m in proposing)
+        text += (f", and {runs - pairs} later proposals of {names} on pairs their earlier "
+                 "proposals had not hung")
+    return text + "."
+
+
+def bench_table(bench: dict) -> str:
+    """The committed bench.json as a table, one row per measured key."""
+    sample = []
+    if "machine" in bench:
+        sample.append(f"on {bench['machine']}")
+    if "rrt_bench_supports" in bench:
+        sample.append(f"planning and rendering on {bench['rrt_bench_supports']} supports balanced "
+                      f"across levels ({bench.get('rrt_bench_skts', '?')} SKTs)")
+    if "sim_bench_trials" in bench:
+        sample.append(f"simulation over {bench['sim_bench_trials']} oracle trials")
+    lines = (["Measured " + "; ".join(sample) + "; medians.", ""] if sample else [])
+    lines += ["| key | value | what |", "|---|---|---|"]
+    unknown = sorted(set(bench) - set(BENCH_ROWS) - set(BENCH_SAMPLE))
+    for key in [k for k in BENCH_ROWS if k in bench] + unknown:
+        fmt, meaning = BENCH_ROWS.get(key, ("{}", ""))
+        lines.append(f"| `{key}` | {fmt.format(bench[key])} | {meaning} |")
+    return "\n".join(lines)
+
+
+def paper_preset(bench: dict) -> str:
+    """The paper preset's planning time at the committed planning rate."""
+    rate = bench.get("rrt_skts_per_min")
+    if not rate:
+        return "No planning rate in `reports/bench/bench.json`: run `make bench`."
+    return (f"≈ {PAPER_SKTS / rate / 60:.1f} h for its {PAPER_SKTS:,} SKTs at {rate:.0f} SKTs per "
+            "minute (the committed `rrt_skts_per_min`, on `compute.n_workers` workers).")
+
+
+def blocks(reports: dict) -> dict[str, dict[str, str]]:
+    """File (relative to the repo root) -> block name -> the block's generated text."""
+    metrics, bench = reports["metrics"], reports["bench"]
+    return {
+        "README.md": {"results": table_one(metrics)},
+        "docs/presets.md": {"sim-size": sim_size(metrics), "bench": bench_table(bench),
+                            "paper-preset": paper_preset(bench)},
+    }
+
+
+def _markers(name: str) -> tuple[str, str]:
+    return f"<!-- {name}:start -->", f"<!-- {name}:end -->"
+
+
+def read_block(text: str, name: str, where: str = "text") -> str:
+    """The text between the markers of block ``name`` (without the newlines by the markers)."""
+    start, end = _markers(name)
+    if text.count(start) != 1 or text.count(end) != 1:
+        raise DocsError(f"{where}: needs exactly one '{start}' and one '{end}'")
+    i, j = text.index(start) + len(start), text.index(end)
+    if j < i:
+        raise DocsError(f"{where}: '{end}' comes before '{start}'")
+    return text[i:j].strip("\n")
+
+
+def write_block(text: str, name: str, body: str, where: str = "text") -> str:
+    """``text`` with block ``name`` replaced by ``body``."""
+    read_block(text, name, where)
+    start, end = _markers(name)
+    head, rest = text.split(start, 1)
+    return f"{head}{start}\n{body}\n{end}{rest.split(end, 1)[1]}"
+
+
+def render(root: Path = ROOT, reports: dict | None = None) -> dict[str, tuple[str, str]]:
+    """File -> (current text, text with every block regenerated)."""
+    reports = load_reports(root) if reports is None else reports
+    out = {}
+    for rel, named in blocks(reports).items():
+        path = root / rel
+        if not path.is_file():
+            raise DocsError(f"{rel}: not found")
+        old = new = path.read_text()
+        for name, body in named.items():
+            new = write_block(new, name, body, rel)
+        out[rel] = (old, new)
+    return out
+
+
+def stale(root: Path = ROOT) -> list[str]:
+    """A unified diff per file whose blocks differ from what would be written; empty if none."""
+    diffs = []
+    for rel, (old, new) in render(root).items():
+        if old != new:
+            diffs.append("".join(difflib.unified_diff(
+                old.splitlines(keepends=True), new.splitlines(keepends=True),
+                f"{rel} (committed)", f"{rel} (from the reports)")))
+    return diffs
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="tools.docs_results", description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true",
+                    help="write nothing; exit 1 with a diff if a block is out of date")
+    ap.add_argument("--root", type=Path, default=ROOT,
+                    help="repository root (default: this checkout)")
+    args = ap.parse_args(argv)
+    try:
+        if args.check:
+            diffs = stale(args.root)
+            for diff in diffs:
+                print(diff, end="")
+            if diffs:
+                print("ERROR: run figures in the docs are out of date: run "
+                      "`.venv/bin/python -m tools.docs_results`", file=sys.stderr)
+            return 1 if diffs else 0
+        for rel, (old, new) in render(args.root).items():
+            if old != new:
+                tmp = (args.root / rel).with_suffix(".md.tmp")
+                tmp.write_text(new)
+                tmp.replace(args.root / rel)
+                print(f"{rel}: run figures rewritten from the reports")
+    except DocsError as err:
+        print(f"ERROR: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
