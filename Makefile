@@ -1,16 +1,16 @@
 # Two entry points: `make repro` (the whole pipeline on params.yaml) and `make test`.
-# Both create .venv first if it is missing or older than pyproject.toml.
+# Both create .venv first if it is missing or older than pyproject.toml / requirements.lock.
 SHELL := /bin/bash
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: env repro test bench review seeds mutation train-diagnostics clean-env
+.PHONY: env lock repro test bench review seeds mutation train-diagnostics clean-env
 
 env: $(STAMP)
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml requirements.lock
 	@# open3d dlopens libusb-1.0.so.0 (Debian package libusb-1.0-0).
 	@if ! ldconfig -p | grep -q 'libusb-1.0.so.0'; then \
 	  if [ "$$(id -u)" = 0 ]; then \
@@ -25,8 +25,23 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install -q --upgrade pip
 	@# torch first, pinned: the CPU wheel; unpinned it would pull CUDA packages.
 	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -e '.[dev]'
+	@# every other package at the version requirements.lock pins: no resolution, no drift
+	$(BIN)/pip install -q --no-deps -r requirements.lock
+	$(BIN)/pip install -q --no-deps -e .
+	$(BIN)/pip check
 	@touch $(STAMP)
+
+lock:
+	@# re-resolve pyproject.toml's pins (with the dev extras) in a scratch venv and write
+	@# every installed version to requirements.lock
+	rm -rf .lock-venv && $(PYTHON) -m venv .lock-venv
+	.lock-venv/bin/pip install -q --upgrade pip
+	.lock-venv/bin/pip install -q torch==2.13.0
+	.lock-venv/bin/pip install -q -e '.[dev]'
+	{ echo "# Every transitive dependency, pinned (torch is installed first, on its own: see Makefile)."; \
+	  echo "# Regenerate with \`make lock\` after changing pyproject.toml; \`make env\` installs exactly this."; \
+	  .lock-venv/bin/pip freeze --exclude-editable | grep -v '^torch=='; } > requirements.lock
+	rm -rf .lock-venv
 
 repro: $(STAMP)
 	@# stages run `python -m stages.<name>`: put the venv first on PATH.
