@@ -1,4 +1,4 @@
-"""The README's bad-input table, one row per test: each gives one ``ERROR:`` line naming the
+"""The bad-input table of docs/cli.md, one row per test: each gives one ``ERROR:`` line naming the
 file or argument, exit code 2, no traceback, no output file, and leaves the data root as it was."""
 
 import json

@@ -24,7 +24,7 @@ def test_import_the_pybullet_mug_and_hang_it(capsys, tmp_path, data_root, tiny_d
     d = data_root / "user" / "objects" / "pb_mug"
     rec = json.loads((d / "object.json").read_text())
     parts = read_obj(d / "collision.obj")
-    # the object frame of README "Frames": a rod along x through the origin passes the handle
+    # the object frame of docs/frames.md: a rod along x through the origin passes the handle
     assert aperture_clearance(parts) == pytest.approx(rec["aperture_clearance_m"])
     assert rec["aperture_clearance_m"] >= 0.01  # the handle admits a 1 cm rod
     (visual,) = read_obj(d / "visual.obj")
