@@ -113,16 +113,16 @@ def choose_grasp(world: World, robot: Panda, path: np.ndarray, grasps: tuple[Gra
         raise ValueError("grasps: no candidates")
     to_world = world.to_world
 
-    def clear(q: np.ndarray, bodies, margin) -> bool:
+    def clear(q: np.ndarray, bodies) -> bool:
         robot.reset(q, FINGER_OPEN_M)
-        return all(world.min_distance(robot.body, b) >= margin for b in bodies)
+        return all(world.min_distance(robot.body, b) >= clearance_m for b in bodies)
 
     def start_ok(q: np.ndarray) -> bool:
-        return clear(q, [*fixed, obj], clearance_m)
+        return clear(q, [*fixed, obj])
 
     def first_blocked(joints: np.ndarray) -> int:
         checked = [*range(0, len(joints), check_every), len(joints) - 1]
-        return next((k for k in checked if not clear(joints[k], fixed, clearance_m)), -1)
+        return next((k for k in checked if not clear(joints[k], fixed)), -1)
 
     failures = []
     for i, g in enumerate(grasps):
