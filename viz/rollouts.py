@@ -44,7 +44,7 @@ def robot_meshes(base: tuple[float, float, float]) -> dict[int, tuple[np.ndarray
     frame: {index: (vertices, faces)}."""
     out: dict[int, list] = {}
     with World(1 / 240, 1, with_floor=False) as world:
-        robot = Panda(world, pose_matrix(base, [0, 0, 0, 1]))
+        robot = Panda(world, pose_matrix(base, [0, 0, 0, 1]), visual=True)
         for shape in pb.getVisualShapeData(robot.body, physicsClientId=world.cid):
             link, geom, scale, filename = shape[1], shape[2], shape[3], shape[4]
             if geom != pb.GEOM_MESH or not filename:

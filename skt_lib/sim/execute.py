@@ -25,6 +25,12 @@ approach axis → perturb (the object at ``linear_damping``/``angular_damping``:
 default 0.04 in the committed params, as the anchors') → settle (at the ``settle_*`` damping:
 an undamped hung object keeps swinging) → predicate.
 
+A released object that lies on the floor wholly below the supporting item has fallen for
+good (:class:`_Fallen`): the trial ends there with the predicate's ``touches_floor`` instead
+of running the rest of the perturbation. ``TrialSettings.reference`` runs the reference
+executor instead — numpy IK, the Panda's visual meshes loaded, every perturbation step — which
+``make bench`` times against this one on the same trials, verdict by verdict.
+
 Outcomes (``failure_reason``, empty on success; :data:`REASONS`):
 
 - ``ik_failed``: no reachable grasp at set-up (``detail`` says which check failed:
@@ -85,6 +91,9 @@ class TrialSettings:
     retreat_m: float
     retreat_steps: int
     perturbation: Perturbation
+    #: the reference executor (``make bench`` measures against it): numpy IK, the Panda's
+    #: visual meshes, the full perturbation even where the verdict is certain (module docs)
+    reference: bool = False
 
 
 @dataclass(frozen=True)
@@ -169,7 +178,8 @@ def run_trial(task: TrialTask) -> dict:
             return _end(row, "collided_before_hang", trace)
 
         if task.hand == "panda":
-            robot = Panda(world, pose_matrix(s.robot_base, [0, 0, 0, 1]))
+            robot = Panda(world, pose_matrix(s.robot_base, [0, 0, 0, 1]), compiled=not s.reference,
+                          visual=s.reference)
             trace = _Trace(world, robot, obj, task.record_every)
             choice = choose_grasp(world, robot, path, task.grasps, [support, wall], obj, s.ik_tol_m,
                                   s.ik_tol_rad, s.max_joint_step_rad, s.ik_restarts,
@@ -198,10 +208,11 @@ def run_trial(task: TrialTask) -> dict:
             def command(k: int) -> None:
                 anchor.move(world.to_world(path[k] @ kpt_ee))
 
+        probe = _KeypointProbe(world, obj, keypoint)
         for k, xi in enumerate(path):
             command(k)
             trace.step(s.steps_per_command, "approach")
-            err = _keypoint_error(world, obj, keypoint, xi)
+            err = probe.error(xi)
             row["max_track_err_m"] = max(row["max_track_err_m"], err)
             row["n_executed"] = k + 1
             if err > s.track_tol_m:
@@ -226,12 +237,19 @@ def run_trial(task: TrialTask) -> dict:
                 trace.step(1, "retreat")
                 row["touched_support"] |= bool(world.contacts(obj, support))
         phases = perturb_phases(s.perturbation)
+        fallen = None if s.reference else _Fallen(world, obj, support)
         for i, (gravity, steps) in enumerate(phases):
             if i == len(phases) - 1:  # the settle may damp (DESIGN §5); the perturbation does not
                 pb.changeDynamics(obj, -1, linearDamping=s.settle_linear_damping,
                                   angularDamping=s.settle_angular_damping, physicsClientId=world.cid)
             world.set_gravity_support(gravity)
-            trace.step(steps, "settle" if i == len(phases) - 1 else "perturb")
+            phase = "settle" if i == len(phases) - 1 else "perturb"
+            chunk = steps if fallen is None else FALLEN_CHECK_STEPS
+            for done in range(0, steps, chunk):
+                trace.step(min(chunk, steps - done), phase)
+                if fallen is not None and fallen():  # the predicate would say touches_floor
+                    row["detail"] = "predicate: touches_floor"
+                    return _end(row, "dropped" if row["touched_support"] else "not_reached", trace)
             row["touched_support"] |= bool(world.contacts(obj, support))
         check = check_hang(world, obj, support, s.perturbation,
                            None if robot is None else robot.body)
@@ -241,6 +259,26 @@ def run_trial(task: TrialTask) -> dict:
         row["detail"] = f"predicate: {check.reason}"
         reason = _HANG_REASON.get(check.reason, "dropped" if row["touched_support"] else "not_reached")
         return _end(row, reason, trace)
+
+
+#: Physics steps between two checks whether a released object has fallen for good.
+FALLEN_CHECK_STEPS = 24
+
+
+class _Fallen:
+    """Whether a released object has fallen for good: it lies on the floor, wholly below the
+    supporting item. Nothing in the rest of a trial lifts it again (gravity always points
+    down; the arm has retreated), so the predicate's verdict is certain — ``touches_floor`` —
+    and the rest of the perturbation can be skipped (the reference executor runs it all)."""
+
+    def __init__(self, world: World, obj: int, support: int):
+        self.world, self.obj = world, obj
+        self.bottom = pb.getAABB(support, -1, physicsClientId=world.cid)[0][2]
+
+    def __call__(self) -> bool:
+        w = self.world
+        top = pb.getAABB(self.obj, -1, physicsClientId=w.cid)[1][2]
+        return top < self.bottom and w.floor is not None and bool(w.contacts(self.obj, w.floor))
 
 
 def _attach(world: World, body: int, link: int, obj: int, max_force: float) -> int:
@@ -269,9 +307,19 @@ def _blockers(world: World, movers: dict, fixed: dict, start: bool = False) -> s
     return ",".join(f"{m}-{f}" for m, a in movers.items() for f, b in fixed.items() if touching(a, b))
 
 
-def _keypoint_error(world: World, obj: int, keypoint: np.ndarray, xi: np.ndarray) -> float:
-    actual = world.pose_support(obj) @ keypoint
-    return float(np.linalg.norm(actual[:3, 3] - xi[:3, 3]))
+class _KeypointProbe:
+    """Distance of the object's keypoint from a commanded keypoint frame, read from the
+    base (centre-of-mass) pose PyBullet reports, without a pose conversion per call."""
+
+    def __init__(self, world: World, obj: int, keypoint: np.ndarray):
+        self.world, self.obj = world, obj
+        info = pb.getDynamicsInfo(obj, -1, physicsClientId=world.cid)
+        self.local = (invert(pose_matrix(info[3], info[4])) @ keypoint)[:3, 3]  # in the COM frame
+
+    def error(self, xi: np.ndarray) -> float:
+        pos, quat = pb.getBasePositionAndOrientation(self.obj, physicsClientId=self.world.cid)
+        rot = np.reshape(pb.getMatrixFromQuaternion(quat), (3, 3))
+        return float(np.linalg.norm(rot @ self.local + pos - self.world.to_world(xi)[:3, 3]))
 
 
 def _end(row: dict, reason: str, trace: _Trace) -> dict:

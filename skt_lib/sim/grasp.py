@@ -20,7 +20,7 @@ import numpy as np
 
 from skt_lib.geometry.se3 import invert, transform_points
 from skt_lib.sim.robot import FINGER_OPEN_M, IKFailure, Panda, rank
-from skt_lib.sim.world import World
+from skt_lib.sim.world import SUPPORT_POSE_WORLD, World
 
 #: Radius of the cylinder along the approach that the hand (palm, fingers) sweeps, m.
 HAND_RADIUS_M = 0.06
@@ -111,8 +111,6 @@ def choose_grasp(world: World, robot: Panda, path: np.ndarray, grasps: tuple[Gra
     the arm at the chosen path's start."""
     if not grasps:
         raise ValueError("grasps: no candidates")
-    to_world = world.to_world
-
     def clear(q: np.ndarray, bodies) -> bool:
         robot.reset(q, FINGER_OPEN_M)
         return all(world.min_distance(robot.body, b) >= clearance_m for b in bodies)
@@ -127,7 +125,7 @@ def choose_grasp(world: World, robot: Panda, path: np.ndarray, grasps: tuple[Gra
     failures = []
     for i, g in enumerate(grasps):
         kpt_ee = g.matrix()
-        targets = [to_world(xi @ kpt_ee) for xi in path]
+        targets = list(SUPPORT_POSE_WORLD @ (path @ kpt_ee))  # = to_world(ξ · T_kpt_ee)
         out = robot.joint_path(targets, tol_m, tol_rad, max_jump_rad, restarts, start_ok, first_blocked)
         if isinstance(out, IKFailure):
             failures.append(out)

@@ -11,12 +11,17 @@ and the step is solved again for the others), plus a null-space pull toward a re
 configuration. Clipping a solution to the limits afterwards — what PyBullet's IK leaves to
 its caller — moves the hand by millimetres exactly where a path runs along a limit; here the
 limit is part of the solve.
+
+The solve runs compiled (:mod:`skt_lib.sim.ik_kernel`, numba) unless the chain is built with
+``compiled=False``: then the numpy code below, the reference it is tested against.
 """
 
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 import numpy as np
+
+from skt_lib.sim import ik_kernel
 
 
 def _rpy_matrix(rpy) -> np.ndarray:
@@ -73,9 +78,10 @@ class IKSettings:
 
 class Chain:
     """The revolute/prismatic chain of ``urdf`` from its root to ``tip`` (a link name),
-    with its base at ``base`` (4×4, world)."""
+    with its base at ``base`` (4×4, world); ``compiled``: solve with the numba kernel."""
 
-    def __init__(self, urdf: str, tip: str, base: np.ndarray | None = None):
+    def __init__(self, urdf: str, tip: str, base: np.ndarray | None = None,
+                 compiled: bool = True):
         root = ET.parse(urdf).getroot()
         by_child = {j.find("child").get("link"): j for j in root.findall("joint")}
         chain, link = [], tip
@@ -117,6 +123,11 @@ class Chain:
             self._skew.append((k, k @ k))
         self.lower, self.upper = np.array(lower), np.array(upper)
         self.n = len(self.names)
+        self.compiled = compiled
+        self._packed = (np.ascontiguousarray(self.base), np.stack(self._pre), self._tail,
+                        np.stack(self.axes), np.stack([k for k, _ in self._skew]),
+                        np.stack([kk for _, kk in self._skew]), self._prismatic,
+                        self.lower, self.upper)
 
     def _joint(self, i: int, v: float) -> np.ndarray:
         """Motion (4×4) of movable joint ``i`` at value ``v`` (Rodrigues for revolute)."""
@@ -168,6 +179,11 @@ class Chain:
         lo, hi = self.lower, self.upper
         q = np.clip(np.asarray(q_init, float), lo, hi)
         rest = q.copy() if q_rest is None else np.asarray(q_rest, float)
+        if self.compiled:
+            q, d, a = ik_kernel.solve(*self._packed, np.ascontiguousarray(target, float), q, rest,
+                                      s.tol_m, s.tol_rad, s.max_iterations, s.damping,
+                                      s.rot_weight_m, s.max_step_rad, s.rest_gain)
+            return q, float(d), float(a)
         w = np.array([1.0, 1.0, 1.0, s.rot_weight_m, s.rot_weight_m, s.rot_weight_m])
         best = (q.copy(), np.inf, np.inf)
         for it in range(s.max_iterations):

@@ -68,17 +68,24 @@ def rank(f: IKFailure) -> tuple[int, int]:
 
 
 class Panda:
-    """One Panda in ``world`` with its base at ``base_world`` (4×4, world frame)."""
+    """One Panda in ``world`` with its base at ``base_world`` (4×4, world frame).
 
-    def __init__(self, world: World, base_world: np.ndarray):
+    ``compiled``: set-up IK with the numba kernel (else the numpy reference);
+    ``visual``: load the visual meshes too (for drawing; a fifth of the load time, and
+    nothing in the physics uses them)."""
+
+    def __init__(self, world: World, base_world: np.ndarray, compiled: bool = True,
+                 visual: bool = False):
         self.cid = world.cid
         pos, quat = matrix_pose(base_world)
-        self.body = pb.loadURDF(PANDA_URDF, pos, quat, useFixedBase=True, physicsClientId=self.cid)
+        self.body = pb.loadURDF(PANDA_URDF, pos, quat, useFixedBase=True,
+                                flags=0 if visual else pb.URDF_IGNORE_VISUAL_SHAPES,
+                                physicsClientId=self.cid)
         info = [pb.getJointInfo(self.body, j, physicsClientId=self.cid) for j in ARM]
         self.lower = np.array([i[8] for i in info])
         self.upper = np.array([i[9] for i in info])
         self.max_force = [i[10] for i in info]
-        self.chain = Chain(PANDA_URDF, GRASP_LINK_NAME, base_world)
+        self.chain = Chain(PANDA_URDF, GRASP_LINK_NAME, base_world, compiled=compiled)
         self.mid = (self.lower + self.upper) / 2.0  # tracking drifts toward mid-range
         if not (np.array_equal(self.chain.lower, self.lower)
                 and np.array_equal(self.chain.upper, self.upper)):

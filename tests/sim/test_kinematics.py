@@ -85,3 +85,20 @@ def test_ik_solves_within_the_limits(chain):
 def test_chain_refuses_a_missing_link():
     with pytest.raises(ValueError, match="no joint leads to link 'nope'"):
         Chain(PANDA_URDF, "nope")
+
+
+def test_the_compiled_solve_equals_the_numpy_reference(chain):
+    """The numba kernel (what set-up runs) against the numpy solve (the reference executor's
+    IK), far starts and tracking starts, joints on their limits included: the same joints."""
+    numpy_chain = Chain(PANDA_URDF, "panda_grasptarget", BASE, compiled=False)
+    assert chain.compiled and not numpy_chain.compiled
+    rng = np.random.default_rng(3)
+    for i in range(40):
+        q_true = rng.uniform(chain.lower, chain.upper)
+        q_true[i % 7] = chain.upper[i % 7] if i % 2 else chain.lower[i % 7]
+        start = np.asarray(REST_Q) if i % 4 == 0 else q_true + rng.normal(0, 0.1, 7)
+        settings = IKSettings(max_iterations=100, rest_gain=0.05 * (i % 2))
+        q, d, a = chain.solve(chain.fk(q_true), start, settings=settings)
+        q_ref, d_ref, a_ref = numpy_chain.solve(chain.fk(q_true), start, settings=settings)
+        assert np.abs(q - q_ref).max() < 1e-8
+        assert d == pytest.approx(d_ref, abs=1e-10) and a == pytest.approx(a_ref, abs=1e-9)

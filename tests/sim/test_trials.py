@@ -2,6 +2,8 @@
 25° up from a wall plate): one trial that must succeed, one per failure reason, the floating
 hand, and a check that an always-succeeding executor would fail these tests."""
 
+import dataclasses
+
 import pytest
 
 from skt_lib.sim import execute
@@ -121,3 +123,21 @@ def test_unknown_hand_is_an_error(scene):
     task = scenes.ring_task(*scene, scenes.straight_skt(), "gripper")
     with pytest.raises(ValueError, match="hand"):
         execute.run_trial(task)
+
+
+def test_the_fast_executor_gives_the_reference_executors_rows(scene):
+    """The compiled IK, the Panda without visual meshes and the early end of a fallen
+    object's perturbation change how long a trial takes, not what it decides: the same row
+    (to rounding in the tracking error) on a success, a collision, a fall and the floating
+    hand; and on the fall the fast executor does stop early."""
+    cases = [(scenes.straight_skt(), "panda"), (scenes.straight_skt(offset=(0.0, 0.0, -0.009)), "panda"),
+             (scenes.straight_skt(offset=(0.0, 0.12, 0.0)), "panda"),
+             (scenes.straight_skt(offset=(0.0, 0.12, 0.0)), "floating")]
+    for positions, hand in cases:
+        fast = dataclasses.replace(scenes.ring_task(*scene, positions, hand), record_every=24)
+        ref = dataclasses.replace(fast, settings=dataclasses.replace(fast.settings, reference=True))
+        a, b = run_trial(ref), run_trial(fast)
+        err_a, err_b = a["row"].pop("max_track_err_m"), b["row"].pop("max_track_err_m")
+        assert a["row"] == b["row"] and err_b == pytest.approx(err_a, abs=1e-9)
+        fell = a["row"]["detail"] == "predicate: touches_floor"
+        assert (len(b["trace"]) < len(a["trace"]) - 40) if fell else (len(b["trace"]) == len(a["trace"]))
