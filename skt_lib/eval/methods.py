@@ -21,12 +21,15 @@ Privileged methods use the cloud only as OmniHang does (for collision checks) or
 they are constructed per support with its ground truth.
 """
 
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
-from skt_lib.learning.predictor import Skt, SktPredictor
+from skt_lib.errors import DataError
 from skt_lib.geometry.skt import skt_frames
+from skt_lib.learning.predictor import Skt, SktPredictor
+from skt_lib.learning.vatmart import VatMartPredictor
 
 #: Methods that need a trained model: SktPredictor ones, then the VAT-Mart proposers.
 LEARNED = ("template_only", "sctdn", "sctdn_cp_feature")
@@ -143,3 +146,15 @@ def make_method(name: str, predictor, gt_positions: np.ndarray, pre_hang: np.nda
     if name == "kpam":
         return Kpam(gt_positions[0], pre_hang, lift, len(gt_positions))
     raise ValueError(f"method: unknown {name!r}")
+
+
+def load_models(root: Path, methods, T: int) -> dict:
+    """The trained models the ``methods`` need, by :data:`MODEL_OF` name."""
+    models = {}
+    for name in dict.fromkeys(MODEL_OF[m] for m in methods if m in MODEL_OF):
+        d = root / "train" if name == "sctdn" else root / "train_baselines" / name
+        model = (VatMartPredictor if name in PROPOSING else SktPredictor).load(d)
+        if model.cfg.T != T:
+            raise DataError(f"{d}: model predicts T = {model.cfg.T}, clustering.T is {T}")
+        models[name] = model
+    return models

@@ -19,9 +19,9 @@ from skt_lib.errors import DataError
 from skt_lib.eval.methods import hand_of
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
+from skt_lib.geometry.skt import resample
 from skt_lib.io import read_npz, read_table
 from skt_lib.perception.views import RENDER_SPEC
-from skt_lib.geometry.skt import resample
 from skt_lib.schemas import KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from skt_lib.sim.contact_sim import perturbation

@@ -1,14 +1,12 @@
 """Best-of-N accounting (the paper's VAT-Mart count) and the proposal rounds of sim_eval."""
 
-from types import SimpleNamespace
-
 import numpy as np
 import pandas as pd
 
 from skt_lib.eval import protocol
 from skt_lib.eval.protocol import SINGLE, per_pair
+from skt_lib.eval.rounds import run_rounds
 from skt_lib.sim.grasp import Grasp
-from stages import sim_eval
 
 
 def _row(method, support, obj, proposal, success, reason=""):
@@ -51,7 +49,6 @@ def _fake_trial(task):
 
 
 def test_rounds_stop_at_the_first_hung_proposal(monkeypatch):
-    monkeypatch.setattr(sim_eval, "run_trial", _fake_trial)
     grasp = (Grasp("g", tuple(np.eye(4).ravel())),)
     sup = [protocol.TestSupport(f"s{i}", "easy", "hook", "u", "m", np.zeros((4, 3)),
                                 np.zeros((10, 3)), 0) for i in range(2)]
@@ -60,9 +57,8 @@ def test_rounds_stop_at_the_first_hung_proposal(monkeypatch):
     positions = {("sctdn", "s0"): [skt(-1)], ("sctdn", "s1"): [skt(1)],
                  ("vatmart", "s0"): [skt(-1), skt(-1), skt(1), skt(1)],
                  ("vatmart", "s1"): [skt(-1), skt(-1), skt(-1), skt(-1)]}
-    compute = SimpleNamespace(backend="local", n_workers=1)
-    rows, tasks = sim_eval.run_rounds(["sctdn", "vatmart"], sup, objs, positions, None, compute,
-                                      None)
+    rows, tasks = run_rounds(["sctdn", "vatmart"], sup, objs, positions, None,
+                             lambda tasks, label: [_fake_trial(t) for t in tasks])
     runs = {}
     for r in rows:
         runs.setdefault((r["method"], r["support_id"], r["object_id"]), []).append(

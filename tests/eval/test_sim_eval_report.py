@@ -8,7 +8,7 @@ from skt_lib.eval.orderings import check_orderings
 from skt_lib.eval.protocol import success_table
 from skt_lib.eval.stats import paired_comparisons, success_ci95
 from skt_lib.sim.execute import REASONS
-from stages.sim_eval import _write_report
+from skt_lib.eval.report import write_report
 
 METHODS = ["oracle_floating", "template_only", "sctdn", "kpam"]
 
@@ -45,7 +45,7 @@ def test_report_shows_intervals_and_paired_verdicts(tmp_path):
     assert set(metrics["paired"]) == {"sctdn_vs_oracle_floating", "sctdn_vs_template_only",
                                       "sctdn_vs_kpam"}
     assert metrics["sctdn"]["success_ci95"]["hard"] is None  # no hard supports here
-    _write_report(tmp_path, trials, trials, metrics, METHODS, [None] * 8, [None] * 5, [], [])
+    write_report(tmp_path, trials, trials, metrics, METHODS, [None] * 8, [None] * 5, [], [])
     text = (tmp_path / "report.md").read_text()
     # Table I: sctdn 36/40 = 90.0 %, Wilson [76.9–96.0]
     lo, hi = metrics["sctdn"]["success_ci95"]["all"]
