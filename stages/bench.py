@@ -14,12 +14,16 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
 - ``cli_predict_ms_median``: ``skt predict``'s prediction of a 1000-point view (cleaning,
   sampling, SCTDN), model loaded, process start excluded;
 - ``sim_trials_per_min``: sim_eval trials (Panda, oracle SKTs, every test object) per minute
-  of wall time on ``compute.n_workers`` workers, over ``per_level`` test supports per level.
+  of wall time on ``compute.n_workers`` workers, over ``per_level`` test supports per level;
+  ``*_reference`` with the reference executor, ``sim_speedup_vs_reference_executor`` the
+  ratio, ``sim_verdict_agreement`` the share of same verdicts (``*_disagreements``: the rest).
 Medians, because these machines are noisy.
 """
 
 import argparse
+import dataclasses
 import json
+import os
 import platform
 import sys
 import tempfile
@@ -103,13 +107,24 @@ def sim_bench(params, root: Path, per_level: int) -> dict:
                                          p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg)
     chosen = [s for lv in LEVELS for s in [s for s in supports if s.difficulty == lv][:per_level]]
     settings = trial_settings(p, params.contact_sim)
-    pre = np.asarray(p.kpam_pre_hang_m)
-    tasks = [make_task("oracle", s, o, make_method("oracle", None, s.gt, pre).predict(s.cloud).positions,
-                       settings) for s in chosen for o in objects]
-    t0 = time.perf_counter()
-    run_items(run_trial, tasks, params.compute, "bench sim")
-    wall = time.perf_counter() - t0
-    return {"sim_trials_per_min": 60.0 * len(tasks) / wall, "sim_bench_trials": len(tasks)}
+    skts = {s.support_id: make_method("oracle", None, s.gt, np.asarray(p.kpam_pre_hang_m))
+            .predict(s.cloud).positions for s in chosen}
+    runs = {}
+    for name, reference in (("reference", True), ("fast", False)):
+        executor = dataclasses.replace(settings, reference=reference)
+        tasks = [make_task("oracle", s, o, skts[s.support_id], executor)
+                 for s in chosen for o in objects]
+        t0 = time.perf_counter()
+        results, _, _ = run_items(run_trial, tasks, params.compute, f"bench sim, {name} executor")
+        runs[name] = ([r["row"] for r in results], 60.0 * len(tasks) / (time.perf_counter() - t0))
+    (ref, ref_rate), (fast, rate) = runs["reference"], runs["fast"]
+    verdict = lambda row: row["failure_reason"] or "success"  # noqa: E731
+    differ = [f"{a['trial_id']}: {verdict(a)} → {verdict(b)}" for a, b in zip(ref, fast)
+              if verdict(a) != verdict(b)]
+    return {"sim_trials_per_min": rate, "sim_trials_per_min_reference": ref_rate,
+            "sim_speedup_vs_reference_executor": rate / ref_rate,
+            "sim_verdict_agreement": 1.0 - len(differ) / len(ref),
+            "sim_verdict_disagreements": differ, "sim_bench_trials": len(ref)}
 
 
 def main(argv=None) -> int:
@@ -119,17 +134,15 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="reports/bench/bench.json")
     ap.add_argument("--per-level", type=int, default=3, help="supports per difficulty level")
     args = ap.parse_args(argv)
-    params = load_params(args.params)
-    out = Path(args.out)
-    bench: dict = {}  # fresh: a key this run does not measure must not survive from an old file
-    bench.update(rrt_bench(params, Path(args.data_root), args.per_level))
-    bench.update(sctdn_bench(Path(args.data_root)))
-    bench.update(cli_bench(Path(args.data_root)))
-    bench.update(sim_bench(params, Path(args.data_root), args.per_level))
+    params, root = load_params(args.params), Path(args.data_root)
+    # fresh: a key this run does not measure must not survive from an old file
+    bench = rrt_bench(params, root, args.per_level) | sctdn_bench(root) | cli_bench(root)
+    bench |= sim_bench(params, root, args.per_level)
     with tempfile.TemporaryDirectory() as tmp:
-        bench.update(render_bench(params, Path(args.data_root), args.per_level, Path(tmp)))
-    bench["machine"] = f"{platform.machine()}, {__import__('os').cpu_count()} cores, {params.compute.n_workers} workers"
-    write_json_atomic(out, bench)
+        bench |= render_bench(params, root, args.per_level, Path(tmp))
+    bench["machine"] = (f"{platform.machine()}, {os.cpu_count()} cores, "
+                        f"{params.compute.n_workers} workers")
+    write_json_atomic(Path(args.out), bench)
     print(json.dumps(bench, indent=2, sort_keys=True))
     return 0
 

@@ -43,8 +43,16 @@ BENCH_ROWS = {
                                            "excluded; median of 30 after 3 warm-up"),
     "sim_trials_per_min": ("{:.0f}", "`sim_eval` trials (Panda, oracle SKTs, every test object) "
                                      "per minute of wall time, `compute.n_workers` workers"),
+    "sim_trials_per_min_reference": ("{:.0f}", "the same trials with the reference executor "
+                                               "(numpy IK, the Panda's visual meshes loaded, "
+                                               "every perturbation step)"),
+    "sim_speedup_vs_reference_executor": ("{:.2f}×", "the executor's trials per minute over the "
+                                                     "reference executor's, same run"),
+    "sim_verdict_agreement": ("{:.3f}", "share of those trials whose verdict (failure reason, "
+                                        "or success) both executors agree on"),
 }
-BENCH_SAMPLE = ("machine", "rrt_bench_supports", "rrt_bench_skts", "sim_bench_trials")
+BENCH_SAMPLE = ("machine", "rrt_bench_supports", "rrt_bench_skts", "sim_bench_trials",
+                "sim_verdict_disagreements")
 
 PAPER_SKTS = 472 * 50  # the paper preset of docs/presets.md: supports × SKTs per support
 
@@ -125,6 +133,10 @@ def bench_table(bench: dict) -> str:
     for key in [k for k in BENCH_ROWS if k in bench] + unknown:
         fmt, meaning = BENCH_ROWS.get(key, ("{}", ""))
         lines.append(f"| `{key}` | {fmt.format(bench[key])} | {meaning} |")
+    if "sim_verdict_disagreements" in bench:
+        differ = bench["sim_verdict_disagreements"]
+        lines += ["", "Verdicts the executors disagree on: "
+                  + ("; ".join(f"`{d}`" for d in differ) if differ else "none") + "."]
     return "\n".join(lines)
 
 
