@@ -102,7 +102,8 @@ def log_rollouts(path: Path, replay: list, support_meshes: dict, object_meshes: 
             sm, om = support_meshes[task.support_id], object_meshes[task.object_id]
             log_mesh(rec, f"{name}/support", sm.vertices, sm.faces, _SUPPORT_RGBA)
             log_mesh(rec, f"{name}/object", om.vertices, om.faces, _OBJECT_RGBA, pose=np.eye(4))
-            skt = np.asarray(task.positions, dtype=np.float64)
+            ran = result.get("skt", 0)  # > 0: set-up fell back to that alternative SKT
+            skt = np.asarray(task.alternatives[ran - 1] if ran else task.positions, np.float64)
             rgb = {**METHOD_RGB, **BASELINE_RGB}.get(task.method, (230, 60, 40))
             log_strip(rec, f"{name}/skt", skt, rgb=rgb, radius=0.0012)
             log_frames(rec, f"{name}/skt/frames", skt_frames(resample(skt, 10)), 0.008)

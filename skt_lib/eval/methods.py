@@ -39,6 +39,9 @@ MODEL_OF = {"template_only": "sctdn", "sctdn": "sctdn", "sctdn_cp_feature": "sct
             "vatmart": "vatmart", "vatmart_mod": "vatmart_mod"}
 #: Methods executed by the floating hand; every other method uses the Panda.
 FLOATING = ("oracle_floating",)
+#: Methods whose Panda set-up may fall back to the support's other stored (ground-truth)
+#: SKTs where no grasp follows the first (:attr:`~skt_lib.sim.execute.TrialTask.alternatives`).
+FALLS_BACK_TO_STORED = ("oracle",)
 
 
 def hand_of(method: str) -> str:

@@ -4,7 +4,9 @@ support, one trial per (method, test support, test object), success rates per le
 The cloud each method sees is one rendered view of the support, drawn per support from the
 seed (``item_rng(seed, "sim_eval", support_id)``). The ground truth of a support is its
 first stored SKT (lowest ``skt_index``) resampled to ``T`` waypoints; supports without one
-are left out of every method's rows and counted.
+are left out of every method's rows and counted. The oracle's Panda set-up falls back to the
+support's further stored SKTs, in order, where no grasp follows the first
+(:data:`~skt_lib.eval.methods.FALLS_BACK_TO_STORED`).
 """
 
 import time
@@ -16,7 +18,7 @@ import pandas as pd
 
 from skt_lib.config import LEVELS, ContactSimParams, SimEvalParams
 from skt_lib.errors import DataError
-from skt_lib.eval.methods import hand_of
+from skt_lib.eval.methods import FALLS_BACK_TO_STORED, hand_of
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
 from skt_lib.geometry.skt import resample
@@ -39,6 +41,7 @@ class TestSupport:
     gt: np.ndarray  # (T, 3) ground-truth SKT, ξ_0 first
     cloud: np.ndarray  # (N, 3) the view the methods see
     view: int
+    others: tuple[np.ndarray, ...] = ()  # the support's further stored SKTs (T, 3), in order
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,17 +69,19 @@ def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_de
     skts = read_table(root / "rrt_skts" / "skts.parquet", SKTS)
     keypoints = read_table(root / "rotation_extraction" / "keypoints.parquet", KEYPOINTS)
     keypoints = keypoints.set_index("object_id")
-    first = skts.sort_values(["support_id", "skt_index"]).groupby("support_id").first()
+    stored = {sid: [resample(np.stack(k), T) for k in g["keypoints"]]
+              for sid, g in skts.sort_values(["support_id", "skt_index"]).groupby("support_id")}
     test, missing = [], []
     for s in supports[supports["split"] == "test"].itertuples():
-        if s.support_id not in first.index:
+        if s.support_id not in stored:
             missing.append(s.support_id)
             continue
         points = read_npz(root / "render_views" / f"{s.support_id}.npz", RENDER_SPEC)["points"]
         view = int(item_rng(seed, "sim_eval", s.support_id).integers(len(points)))
-        gt = resample(np.stack(first.loc[s.support_id, "keypoints"]), T)
+        gt, *others = stored[s.support_id]
         test.append(TestSupport(s.support_id, s.difficulty, s.family, str(mg / s.urdf_path),
-                                str(mg / s.mesh_path), gt, points[view].astype(np.float64), view))
+                                str(mg / s.mesh_path), gt, points[view].astype(np.float64), view,
+                                tuple(others)))
     objs = []
     for o in objects[~objects["is_reference"] & (objects["split"] == "test")].itertuples():
         if o.object_id not in keypoints.index:
@@ -145,11 +150,13 @@ def make_task(method: str, s: TestSupport, o: TestObject, positions: np.ndarray,
     """One trial; ``proposal`` > 0 for a proposing method's later proposals (their ids end in
     ``/p<proposal>``)."""
     tid = f"{method}/{s.support_id}/{o.object_id}" + (f"/p{proposal}" if proposal else "")
+    others = s.others if method in FALLS_BACK_TO_STORED else ()
     return TrialTask(
         tid, method, s.support_id, o.object_id, s.urdf, o.urdf,
         tuple(o.keypoint.ravel()), o.grasps, o.radius_m,
         tuple(map(tuple, np.asarray(positions, float))), settings, record_every,
-        {"difficulty": s.difficulty, "category": o.category, "proposal": proposal}, hand_of(method))
+        {"difficulty": s.difficulty, "category": o.category, "proposal": proposal}, hand_of(method),
+        tuple(tuple(map(tuple, np.asarray(k, float))) for k in others))
 
 
 #: Suffix of the single-sample rows :func:`per_pair` adds for proposing methods.

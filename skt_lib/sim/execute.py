@@ -12,7 +12,11 @@ Two hands (``TrialTask.hand``):
   (:func:`skt_lib.sim.grasp.choose_grasp`: the first for which the IK finds a joint path
   along the whole executed path, the arm clear of support and wall along it and of the
   object at the start); robot–object
-  collisions are off while the object is held and on from the release.
+  collisions are off while the object is held and on from the release. Where no candidate
+  follows the SKT, set-up tries the task's ``alternatives`` (further SKTs of the same
+  support; the oracle's other stored SKTs) in order, skipping one whose start pose the
+  object penetrates, and runs the first that has a grasp (``grasp`` is then prefixed
+  ``skt<k>/``).
 - ``floating``: no arm; a massless, collision-free kinematic anchor at the grasp target
   (first candidate grasp) is moved to each command pose, with the same hold constraint; at
   the release it is removed, so it cannot hold the object.
@@ -55,7 +59,7 @@ import pybullet as pb
 
 from skt_lib.geometry.se3 import invert, matrix_pose, pose_matrix
 from skt_lib.geometry.skt import executed_path
-from skt_lib.sim.grasp import Grasp, GraspFailure, choose_grasp
+from skt_lib.sim.grasp import Grasp, GraspChoice, GraspFailure, choose_grasp
 from skt_lib.sim.hanging import Perturbation, check_hang, perturb_phases
 from skt_lib.sim.robot import FINGER_OPEN_M, GRASP_LINK, Panda
 from skt_lib.sim.world import World
@@ -112,6 +116,9 @@ class TrialTask:
     record_every: int = 0  # > 0: keep a trace every this many physics steps
     extra: dict = field(default_factory=dict)  # copied into the row (difficulty, category…)
     hand: str = "panda"  # "panda" | "floating"
+    #: further SKTs (same layout as ``positions``) the Panda's set-up may fall back to, in
+    #: order, when no grasp follows ``positions`` (the oracle: the support's other stored SKTs)
+    alternatives: tuple[tuple[tuple[float, float, float], ...], ...] = ()
 
 
 class _Trace:
@@ -121,6 +128,7 @@ class _Trace:
     def __init__(self, world: World, robot: Panda | None, obj: int, every: int):
         self.world, self.robot, self.obj, self.every = world, robot, obj, every
         self.frames: list[dict] = []
+        self.skt = 0  # which SKT ran: 0 the task's, k > 0 its k-th alternative
         self._count = 0
 
     def step(self, n: int, phase: str) -> None:
@@ -181,13 +189,27 @@ def run_trial(task: TrialTask) -> dict:
             robot = Panda(world, pose_matrix(s.robot_base, [0, 0, 0, 1]), compiled=not s.reference,
                           visual=s.reference)
             trace = _Trace(world, robot, obj, task.record_every)
-            choice = choose_grasp(world, robot, path, task.grasps, [support, wall], obj, s.ik_tol_m,
-                                  s.ik_tol_rad, s.max_joint_step_rad, s.ik_restarts,
-                                  s.setup_clearance_m)
+            def setup(p: np.ndarray) -> GraspChoice | GraspFailure:
+                return choose_grasp(world, robot, p, task.grasps, [support, wall], obj, s.ik_tol_m,
+                                    s.ik_tol_rad, s.max_joint_step_rad, s.ik_restarts,
+                                    s.setup_clearance_m)
+
+            choice = first = setup(path)
+            for j, alt in enumerate(task.alternatives, 1):
+                if not isinstance(choice, GraspFailure):
+                    break
+                alt_path = executed_path(alt, s.step_m, task.object_radius_m)
+                world.set_pose_support(obj, alt_path[0] @ invert(keypoint))
+                if not _blockers(world, {"object": obj}, fixed, start=True):
+                    choice, path, trace.skt = setup(alt_path), alt_path, j
             if isinstance(choice, GraspFailure):
-                row["detail"] = choice.describe()
+                trace.skt = 0
+                row["detail"] = first.describe() + (
+                    f"; nor on any of {len(task.alternatives)} further SKTs"
+                    if task.alternatives else "")
                 return _end(row, "ik_failed", trace)
-            row["grasp"] = choice.grasp.label
+            row["n_commands"] = len(path)
+            row["grasp"] = (f"skt{trace.skt}/" if trace.skt else "") + choice.grasp.label
             kpt_ee, joints = choice.grasp.matrix(), choice.joints
             robot.set_collision_with(obj, False)
             grip = _attach(world, robot.body, GRASP_LINK, obj, s.grasp_force_n)
@@ -324,4 +346,4 @@ class _KeypointProbe:
 
 def _end(row: dict, reason: str, trace: _Trace) -> dict:
     row["failure_reason"] = reason
-    return {"row": row, "trace": trace.frames}
+    return {"row": row, "trace": trace.frames, "skt": trace.skt}

@@ -4,15 +4,17 @@ order-independent, repeatable trials."""
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from skt_lib.config import LEVELS, load_params
 from skt_lib.eval.methods import make_method
 from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
-from skt_lib.io import read_npz, read_table
+from skt_lib.io import read_npz, read_table, write_table
 from skt_lib.learning.predictor import SktPredictor
+from skt_lib.geometry.skt import resample
 from skt_lib.perception.views import RENDER_SPEC
-from skt_lib.schemas import TRIALS
+from skt_lib.schemas import SKTS, TRIALS
 from skt_lib.sim.execute import REASONS, run_trial
 from stages import sim_eval
 
@@ -138,3 +140,28 @@ def test_template_only_is_the_undeformed_sctdn_output(evaluated):
     assert np.allclose(templ.positions - templ.positions[0], t - t[0], atol=1e-5)
     assert np.allclose(templ.positions[0], templ.contact + t[0], atol=1e-5)
     assert full.family == templ.family and np.allclose(full.contact, templ.contact)
+
+
+def test_only_the_oracle_falls_back_to_the_supports_other_stored_skts(evaluated, tmp_path):
+    params_path, data, _, _ = evaluated
+    p = load_params(params_path)
+    # the tiny run stores one SKT per support: add a second, shifted, under a copy of the data
+    for d in ("mesh_gen", "render_views", "rotation_extraction"):
+        (tmp_path / d).symlink_to((data / d).resolve())
+    skts = read_table(data / "rrt_skts" / "skts.parquet", SKTS)
+    second = skts.assign(skt_index=skts["skt_index"] + 1,
+                         keypoints=[[list(np.add(k, [0.0, 0.0, 0.01])) for k in ks]
+                                    for ks in skts["keypoints"]])
+    (tmp_path / "rrt_skts").mkdir()
+    write_table(tmp_path / "rrt_skts" / "skts.parquet",
+                pd.concat([second, skts]).to_dict("records"), SKTS)
+    supports, objects, _ = load_test_set(tmp_path, p.clustering.T, p.common.seed, (45.0,))
+    settings = trial_settings(p.sim_eval, p.contact_sim)
+    for s in supports:
+        first = skts[skts["support_id"] == s.support_id]["keypoints"].iloc[0]
+        assert np.allclose(s.gt, resample(np.stack(first), p.clustering.T))  # lowest index first
+        assert len(s.others) == 1 and np.allclose(s.others[0], s.gt + [0.0, 0.0, 0.01])
+        task = make_task("oracle", s, objects[0], s.gt, settings)
+        assert len(task.alternatives) == 1 and np.allclose(task.alternatives[0], s.others[0])
+        for m in ("oracle_floating", "kpam", "sctdn"):
+            assert make_task(m, s, objects[0], s.gt, settings).alternatives == ()

@@ -141,3 +141,18 @@ def test_the_fast_executor_gives_the_reference_executors_rows(scene):
         assert a["row"] == b["row"] and err_b == pytest.approx(err_a, abs=1e-9)
         fell = a["row"]["detail"] == "predicate: touches_floor"
         assert (len(b["trace"]) < len(a["trace"]) - 40) if fell else (len(b["trace"]) == len(a["trace"]))
+
+
+def test_set_up_falls_back_to_an_alternative_skt(scene):
+    """Out of reach on the task's SKT, the Panda's set-up runs the first alternative with a
+    grasp and says so; with none, it is ik_failed naming how many were tried."""
+    far = scenes.straight_skt(offset=(0.0, 1.5, 0.0))
+    task = scenes.ring_task(*scene, far)
+    ok = run_trial(dataclasses.replace(task, alternatives=(tuple(map(tuple, far)),
+                                                            tuple(map(tuple, scenes.straight_skt())))))
+    assert ok["row"]["success"] and ok["skt"] == 2, ok["row"]
+    assert ok["row"]["grasp"].startswith("skt2/pitch")
+    assert ok["row"]["n_commands"] == run_trial(scenes.ring_task(*scene, scenes.straight_skt()))["row"]["n_commands"]
+    none = run_trial(dataclasses.replace(task, alternatives=(tuple(map(tuple, far)),)))
+    assert none["row"]["failure_reason"] == "ik_failed" and none["skt"] == 0
+    assert none["row"]["detail"].endswith("nor on any of 1 further SKTs")
