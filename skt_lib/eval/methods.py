@@ -39,9 +39,10 @@ MODEL_OF = {"template_only": "sctdn", "sctdn": "sctdn", "sctdn_cp_feature": "sct
             "vatmart": "vatmart", "vatmart_mod": "vatmart_mod"}
 #: Methods executed by the floating hand; every other method uses the Panda.
 FLOATING = ("oracle_floating",)
-#: Methods whose Panda set-up may fall back to the support's other stored (ground-truth)
-#: SKTs where no grasp follows the first (:attr:`~skt_lib.sim.execute.TrialTask.alternatives`).
-FALLS_BACK_TO_STORED = ("oracle",)
+#: Methods whose set-up chooses among the support's stored (ground-truth) SKTs: the first
+#: along which the object sweeps clear and (Panda) a grasp follows
+#: (:attr:`~skt_lib.sim.execute.TrialTask.alternatives`).
+FALLS_BACK_TO_STORED = ("oracle", "oracle_floating")
 
 
 def hand_of(method: str) -> str:

@@ -167,7 +167,7 @@ def run_trial(task: TrialTask) -> dict:
     if not task.grasps:
         raise ValueError(f"{task.trial_id}: no grasp candidates")
     keypoint = np.asarray(task.keypoint, float).reshape(4, 4)
-    path = executed_path(task.positions, s.step_m, task.object_radius_m)
+    path = executed_path(task.positions, s.step_m, task.object_radius_m)  # the object's start
     row = {"trial_id": task.trial_id, "method": task.method, "support_id": task.support_id,
            "object_id": task.object_id, **task.extra, "success": False, "failure_reason": "",
            "n_commands": len(path), "n_executed": 0, "max_track_err_m": 0.0,
@@ -179,37 +179,32 @@ def run_trial(task: TrialTask) -> dict:
                          friction=s.friction, linear_damping=s.linear_damping,
                          angular_damping=s.angular_damping)
         fixed = {"support": support, "wall": wall}
-        row["blocked_by"] = _blockers(world, {"object": obj}, fixed, start=True)
-        if row["blocked_by"]:
-            trace = _Trace(world, None, obj, task.record_every)
-            row["detail"] = "object penetrates at the start pose"
-            return _end(row, "collided_before_hang", trace)
-
         if task.hand == "panda":
             robot = Panda(world, pose_matrix(s.robot_base, [0, 0, 0, 1]), compiled=not s.reference,
                           visual=s.reference)
-            trace = _Trace(world, robot, obj, task.record_every)
+
             def setup(p: np.ndarray) -> GraspChoice | GraspFailure:
                 return choose_grasp(world, robot, p, task.grasps, [support, wall], obj, s.ik_tol_m,
                                     s.ik_tol_rad, s.max_joint_step_rad, s.ik_restarts,
                                     s.setup_clearance_m)
-
-            choice = first = setup(path)
-            for j, alt in enumerate(task.alternatives, 1):
-                if not isinstance(choice, GraspFailure):
-                    break
-                alt_path = executed_path(alt, s.step_m, task.object_radius_m)
-                world.set_pose_support(obj, alt_path[0] @ invert(keypoint))
-                if not _blockers(world, {"object": obj}, fixed, start=True):
-                    choice, path, trace.skt = setup(alt_path), alt_path, j
+        else:
+            robot, setup = None, None
+        trace = _Trace(world, robot, obj, task.record_every)
+        ran, path, choice = _choose_skt(world, task, keypoint, obj, fixed, path, setup)
+        trace.skt = ran
+        if choice is None:  # every SKT starts with the object in the support or wall
+            row["blocked_by"] = _blockers(world, {"object": obj}, fixed, start=True)
+            row["detail"] = "object penetrates at the start pose"
+            return _end(row, "collided_before_hang", trace)
+        prefix = f"skt{ran}/" if ran else ""
+        row["n_commands"] = len(path)
+        if robot is not None:
             if isinstance(choice, GraspFailure):
-                trace.skt = 0
-                row["detail"] = first.describe() + (
+                row["detail"] = choice.describe() + (
                     f"; nor on any of {len(task.alternatives)} further SKTs"
                     if task.alternatives else "")
                 return _end(row, "ik_failed", trace)
-            row["n_commands"] = len(path)
-            row["grasp"] = (f"skt{trace.skt}/" if trace.skt else "") + choice.grasp.label
+            row["grasp"] = prefix + choice.grasp.label
             kpt_ee, joints = choice.grasp.matrix(), choice.joints
             robot.set_collision_with(obj, False)
             grip = _attach(world, robot.body, GRASP_LINK, obj, s.grasp_force_n)
@@ -218,10 +213,8 @@ def run_trial(task: TrialTask) -> dict:
             def command(k: int) -> None:
                 robot.command(joints[k])
         else:
-            robot = None
-            trace = _Trace(world, None, obj, task.record_every)
             grasp = task.grasps[0]
-            row["grasp"] = grasp.label
+            row["grasp"] = prefix + grasp.label
             kpt_ee = grasp.matrix()
             anchor = _Anchor(world, world.to_world(path[0] @ kpt_ee))
             grip = _attach(world, anchor.body, -1, obj, s.grasp_force_n)
@@ -281,6 +274,62 @@ def run_trial(task: TrialTask) -> dict:
         row["detail"] = f"predicate: {check.reason}"
         reason = _HANG_REASON.get(check.reason, "dropped" if row["touched_support"] else "not_reached")
         return _end(row, reason, trace)
+
+
+#: Set-up with alternatives (the oracle's): an SKT along which the object, swept
+#: kinematically, penetrates support or wall deeper than this (m) is tried only after those
+#: it does not; the sweep looks at every ``SWEEP_EVERY``-th pose of the executed path.
+SWEEP_TOL_M = 0.002
+SWEEP_EVERY = 2
+
+
+def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, fixed: dict,
+                path: np.ndarray, setup) -> tuple[int, np.ndarray,
+                                                   GraspChoice | GraspFailure | bool | None]:
+    """Which SKT a trial runs: ``(k, its executed path, set-up)`` — ``k`` 0 for the task's
+    own SKT (executed ``path``), ``k`` > 0 for its k-th alternative; set-up: the
+    :class:`GraspChoice` (Panda, ``setup`` given), ``True`` (floating hand), the
+    :class:`GraspFailure` of the task's own SKT (else of the first tried) when no SKT has a
+    grasp, or ``None`` when every SKT starts with the object in the support or wall. Leaves
+    the object at the chosen path's start.
+
+    Without alternatives: the task's SKT. With them: the SKTs whose sweep of the object is
+    clear (:data:`SWEEP_TOL_M`) first, then the others, each group in order; the first whose
+    start pose the object does not penetrate and (Panda) that a grasp candidate follows."""
+    s = task.settings
+    inv = invert(keypoint)
+    paths = [path, *(executed_path(p, s.step_m, task.object_radius_m) for p in task.alternatives)]
+    order = list(range(len(paths)))
+    if task.alternatives:
+        clear = [_sweep_clear(world, obj, inv, p, fixed.values()) for p in paths]
+        order = [k for k in order if clear[k]] + [k for k in order if not clear[k]]
+    failures = {}
+    for k in order:
+        if task.alternatives:  # the sweep moved it; else it still stands where it was loaded
+            world.set_pose_support(obj, paths[k][0] @ inv)
+        if _blockers(world, {"object": obj}, fixed, start=True):
+            continue
+        if setup is None:
+            return k, paths[k], True
+        choice = setup(paths[k])
+        if not isinstance(choice, GraspFailure):
+            return k, paths[k], choice
+        failures[k] = choice
+    if not failures:
+        return 0, paths[0], None
+    return 0, paths[0], failures.get(0, next(iter(failures.values())))
+
+
+def _sweep_clear(world: World, obj: int, inv_keypoint: np.ndarray, path: np.ndarray,
+                 bodies) -> bool:
+    """The object placed along ``path`` (keypoint frames) penetrates none of ``bodies`` by
+    more than :data:`SWEEP_TOL_M` (kinematic; at every :data:`SWEEP_EVERY`-th pose and the
+    last)."""
+    for k in [*range(0, len(path), SWEEP_EVERY), len(path) - 1]:
+        world.set_pose_support(obj, path[k] @ inv_keypoint)
+        if any(world.min_distance(obj, b, 0.0) < -SWEEP_TOL_M for b in bodies):
+            return False
+    return True
 
 
 #: Physics steps between two checks whether a released object has fallen for good.

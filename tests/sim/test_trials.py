@@ -156,3 +156,16 @@ def test_set_up_falls_back_to_an_alternative_skt(scene):
     none = run_trial(dataclasses.replace(task, alternatives=(tuple(map(tuple, far)),)))
     assert none["row"]["failure_reason"] == "ik_failed" and none["skt"] == 0
     assert none["row"]["detail"].endswith("nor on any of 1 further SKTs")
+
+
+@pytest.mark.parametrize("hand", ["panda", "floating"])
+def test_set_up_prefers_an_alternative_the_object_sweeps_clear(scene, hand):
+    """The task's own SKT runs the ring into the peg (collided_before_hang alone); given a
+    clear alternative, set-up runs that one instead — with either hand."""
+    into = scenes.straight_skt(offset=(0.0, 0.0, -0.009))
+    assert _row(scene, into, hand=hand)["failure_reason"] == "collided_before_hang"
+    task = dataclasses.replace(scenes.ring_task(*scene, into, hand),
+                               alternatives=(tuple(map(tuple, scenes.straight_skt())),))
+    out = run_trial(task)
+    assert out["row"]["success"] and out["skt"] == 1, out["row"]
+    assert out["row"]["grasp"].startswith("skt1/")
