@@ -142,7 +142,7 @@ def test_template_only_is_the_undeformed_sctdn_output(evaluated):
     assert full.family == templ.family and np.allclose(full.contact, templ.contact)
 
 
-def test_only_the_oracle_falls_back_to_the_supports_other_stored_skts(evaluated, tmp_path):
+def test_only_the_oracles_fall_back_to_the_supports_other_stored_skts(evaluated, tmp_path):
     params_path, data, _, _ = evaluated
     p = load_params(params_path)
     # the tiny run stores one SKT per support: add a second, shifted, under a copy of the data
@@ -161,7 +161,8 @@ def test_only_the_oracle_falls_back_to_the_supports_other_stored_skts(evaluated,
         first = skts[skts["support_id"] == s.support_id]["keypoints"].iloc[0]
         assert np.allclose(s.gt, resample(np.stack(first), p.clustering.T))  # lowest index first
         assert len(s.others) == 1 and np.allclose(s.others[0], s.gt + [0.0, 0.0, 0.01])
-        task = make_task("oracle", s, objects[0], s.gt, settings)
-        assert len(task.alternatives) == 1 and np.allclose(task.alternatives[0], s.others[0])
-        for m in ("oracle_floating", "kpam", "sctdn"):
+        for m in ("oracle", "oracle_floating"):
+            task = make_task(m, s, objects[0], s.gt, settings)
+            assert len(task.alternatives) == 1 and np.allclose(task.alternatives[0], s.others[0])
+        for m in ("kpam", "sctdn", "template_only", "vatmart", "omnihang"):
             assert make_task(m, s, objects[0], s.gt, settings).alternatives == ()
