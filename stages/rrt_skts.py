@@ -15,21 +15,17 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
-import rerun.blueprint as rrb
 
 from skt_lib.config import LEVELS, load_params
-from skt_lib.geometry.build import OBJECT_RGBA, SUPPORT_RGBA
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import matrix_pose, pose_matrix
+from skt_lib.geometry.skt import arc_length
 from skt_lib.io import read_table, write_table
 from skt_lib.planning.skts import REACH_TOL_M, load_skt_tasks, plan_support_skts
-from skt_lib.geometry.skt import arc_length, resample, skt_frames
 from skt_lib.schemas import OBJECTS, SKTS, SUPPORTS
 from stages._common import item_store, parse_args, run_items
-from viz.figures import Panel, histogram, mesh_gallery
-from viz.report import Report, write_metrics
-from viz.rerun_log import (SKT_EYE, SKT_LOOK_AT, ItemTimeline, item_blueprint, log_frames, log_mesh, log_strip,
-                           recording, support_path)
+from viz.report import write_metrics
+from viz.rrt_skts_report import log_skts, write_report
 
 log = logging.getLogger("rrt_skts")
 #: A test object's sweep along the oracle SKT is "clear" when it penetrates at most this much
@@ -105,76 +101,9 @@ def main(argv=None) -> int:
     write_metrics(rep, metrics)
 
     meshes = {sid: read_obj(mg / supports.loc[sid, "mesh_path"])[0] for sid in {t.support_id for t in tasks}}
-    ref_mesh = read_obj(mg / ref.mesh_path)[0]
-    bp = item_blueprint("rrt_skts: ground-truth SKTs (reference object at ξ_0 and at the start)",
-                        "support", SKT_EYE, SKT_LOOK_AT,
-                        side=(rrb.TimeSeriesView(origin="plots", name="per support"),))
-    with recording("rrt_skts", out / "rrt_skts.rrd", "rrt_skts", bp) as rec:
-        items = ItemTimeline(rec, "support")
-        for r in results:
-            sid = r["support_id"]
-            e, m = support_path(sid), meshes[sid]
-            items.next(e, sid, level=level[sid], family=supports.loc[sid, "family"],
-                       skts=f"{len(r['skts'])} of {r['n_attempted']} attempted",
-                       min_clearance_mm=(1000 * min(k["min_clearance_m"] for k in r["skts"])
-                                         if r["skts"] else "-"),
-                       failures=", ".join(f"{k} {v}" for k, v in sorted(r["failures"].items())) or "none")
-            items.scalar("skts_planned", len(r["skts"]))
-            log_mesh(rec, e, m.vertices, m.faces, SUPPORT_RGBA)
-            for s in r["skts"]:
-                log_strip(rec, f"{e}/skt/{s['index']}", s["keypoints"], radius=0.001)
-                log_frames(rec, f"{e}/skt/{s['index']}/waypoints",
-                           skt_frames(resample(s["keypoints"], 10)), 0.01)
-            if r["skts"]:  # poses ξ_0 first: the hanging pose, then out to the start
-                poses = r["skts"][0]["poses"]
-                log_mesh(rec, f"{e}/reference/hung", ref_mesh.vertices, ref_mesh.faces,
-                         OBJECT_RGBA["reference"], pose=poses[0])
-                log_mesh(rec, f"{e}/reference/start", ref_mesh.vertices, ref_mesh.faces,
-                         (*OBJECT_RGBA["reference"][:3], 0.3), pose=poses[-1])
-
-    report = Report("rrt_skts", rep)
-    report.text(f"{len(rows)} SKTs on {metrics['n_supports_with_skts']}/{len(tasks)} supports "
-                f"({n_attempted} attempted, {p.n_skts_per_support} per support) on "
-                f"{params.compute.n_workers} worker(s). Every stored SKT ends at the hang: ξ_0 within "
-                f"{REACH_TOL_M * 1000:.0f} mm of the reference's hanging keypoint (median "
-                f"{1000 * (metrics['xi0_error_median_m'] or 0):.1f} mm, max "
-                f"{1000 * (metrics['xi0_error_max_m'] or 0):.1f} mm); an attempt that ends elsewhere "
-                "is a failure (`off_hang`), never a planned SKT. Re-check (independent, Open3D signed "
-                "distance of the reference as executed — SKT frames of the SKT resampled to T = "
-                f"{params.clustering.T}, ≤ {p.recheck_step_m * 1000:.1f} mm steps): "
-                f"{metrics['recheck_collision_free_rate']:.3f} of planned SKTs pass it. Planner: "
-                "threading tree in keypoint space grown from the hang, each node's frame transported "
-                f"from its parent's (rotation-minimizing; no pitch limit; edge {p.step_m * 1000:.0f} mm, "
-                f"turn ≤ {p.max_turn_deg:.0f}° per edge, straight {p.lead_in_m * 1000:.0f} mm lead-in "
-                f"along the hanging keypoint's x, release lifted ≤ {p.max_lift_m * 1000:.0f} mm where the "
-                f"reference does not fit at the hang; samples: {p.goal_bias:.0%} start region, "
-                f"{p.surface_bias:.0%} within {p.surface_offset_m * 1000:.0f} mm of the support's "
-                "surface, the rest uniform).")
-    report.table(["level", "attempted", "reach the hang", "rate"],
-                 [[lv, attempted_by_level[lv], reached[lv],
-                   f"{metrics['reaches_hang_rate_by_level'][lv]:.3f}"] for lv in LEVELS])
-    report.heading("Test objects along the oracle SKTs")
-    report.text(f"Each test support's first SKT (the oracle of sim_eval) swept with every *test* "
-                f"object at its own keypoint, as executed: {metrics['test_sweep_n_pairs']} pairs, "
-                f"clear (penetration ≤ {SWEEP_TOL_M * 1000:.0f} mm) "
-                f"{100 * (metrics['test_sweep_clear_rate'] or 0):.1f} %, median clearance "
-                f"{metrics['test_sweep_clearance_mm_median'] or 0:.1f} mm (capped at 6 mm). Test objects "
-                "take no part in planning" + (" ; training objects did (probe)." if p.probe_train_objects
-                                             else "; training objects did not either (see README)."))
-    if sweeps:
-        histogram([1000 * c for c in sweeps], report.figure("test_sweeps.png", "Test-object sweep "
-                  "clearance along oracle SKTs (mm, < 0: penetration)"), "clearance", "mm")
-    report.table(["failure", "count"], [[k, v] for k, v in sorted(failures.items())] or [["none", 0]])
-    panels = []
-    for lv in LEVELS:
-        for r in [r for r in results if level[r["support_id"]] == lv and r["skts"]][:3]:
-            m = meshes[r["support_id"]]
-            panels.append(Panel(f"{r['support_id']} ({lv})", [(m.vertices, m.faces, SUPPORT_RGBA)],
-                                lines=[s["keypoints"] for s in r["skts"]]))
-    mesh_gallery(panels, report.figure("skts_by_level.png", "Sample SKTs (keypoint paths), one row "
-                                       "per level"), ncols=3)
-    report.recording("support")
-    report.write()
+    log_skts(out / "rrt_skts.rrd", results, supports, meshes, read_obj(mg / ref.mesh_path)[0])
+    write_report(rep, params, metrics, results, supports, meshes, attempted_by_level, reached,
+                 failures, sweeps, SWEEP_TOL_M)
     log.info("%.1f s wall, median plan %.3f s", wall, float(np.median(plan_s or [0])))
     log.info("%d SKTs, reach the hang %.3f, recheck %.3f", len(rows), metrics["reaches_hang_rate"],
              metrics["recheck_collision_free_rate"])
