@@ -316,6 +316,8 @@ def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, f
             return k, paths[k], choice
         failures[k] = choice
     if not failures:
+        if task.alternatives:  # back at the task's own start, for the blockers the row names
+            world.set_pose_support(obj, paths[0][0] @ inv)
         return 0, paths[0], None
     return 0, paths[0], failures.get(0, next(iter(failures.values())))
 
