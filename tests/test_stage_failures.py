@@ -12,6 +12,7 @@ import pytest
 from skt_lib.config import ComputeParams
 from skt_lib.errors import DataError, ItemFailure
 from stages import contact_sim, render_views
+from viz import contact_sim_report
 
 COMPUTE = ComputeParams(backend="local", n_workers=1)
 
@@ -108,7 +109,7 @@ def test_contact_sim_counts_items_that_raise(monkeypatch, tmp_path):
                         written.setdefault("rows", rows))
     monkeypatch.setattr(contact_sim, "read_obj", lambda *a: [SimpleNamespace(
         vertices=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]))])
-    _quiet(monkeypatch, contact_sim, "log_mesh", "log_points", "mesh_gallery")
+    _quiet(monkeypatch, contact_sim_report, "log_mesh", "log_points", "mesh_gallery")
     assert contact_sim.main(_args(tmp_path)) == 0
     m = json.loads((tmp_path / "rep" / "metrics.json").read_text())
     assert [r["item_id"] for r in written["rows"]] == ["ref", "o1", "s0", "s2"]
