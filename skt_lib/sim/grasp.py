@@ -111,6 +111,7 @@ def choose_grasp(world: World, robot: Panda, path: np.ndarray, grasps: tuple[Gra
     the arm at the chosen path's start."""
     if not grasps:
         raise ValueError("grasps: no candidates")
+
     def clear(q: np.ndarray, bodies) -> bool:
         robot.reset(q, FINGER_OPEN_M)
         return all(world.min_distance(robot.body, b) >= clearance_m for b in bodies)

@@ -71,8 +71,8 @@ class Panda:
     """One Panda in ``world`` with its base at ``base_world`` (4×4, world frame).
 
     ``compiled``: set-up IK with the numba kernel (else the numpy reference);
-    ``visual``: load the visual meshes too (for drawing; a fifth of the load time, and
-    nothing in the physics uses them)."""
+    ``visual``: load the visual meshes too (for drawing only: they are four fifths of the
+    load time, and nothing in the physics uses them)."""
 
     def __init__(self, world: World, base_world: np.ndarray, compiled: bool = True,
                  visual: bool = False):
