@@ -3,10 +3,8 @@
 Runs on the artifacts of ``make repro`` with the committed params and writes
 ``reports/bench/bench.json`` afresh (every key from this run; nothing kept from an older file):
 
-- ``rrt_plan_s_median``: median planning time per SKT attempt (1 process per support);
-- ``rrt_skts_per_min``: SKTs (planned + independently re-checked) per minute of wall time
-  on ``compute.n_workers`` workers, over a sample of supports balanced across levels;
-- ``rrt_recheck_s_median``: median re-check time per SKT;
+- ``rrt_plan_s_median`` / ``rrt_recheck_s_median``: per SKT attempt / re-check, and
+  ``rrt_skts_per_min`` on ``compute.n_workers`` workers, over supports balanced across levels;
 - ``render_ms_per_view_median``: ray casting of one 320×240 view (Open3D), and
   ``render_total_ms_per_view_median``: the whole view (ray casting, FPS to N, shuffle,
   NPZ write share), over the same sample of supports, one process;
@@ -17,7 +15,7 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
   of wall time on ``compute.n_workers`` workers, over ``per_level`` test supports per level;
   ``*_reference`` with the reference executor, ``sim_speedup_vs_reference_executor`` the
   ratio, ``sim_verdict_agreement`` the share of same verdicts (``*_disagreements``: the rest).
-Medians, because these machines are noisy.
+Medians, because these machines are noisy. Each key's meaning: ``tools/docs_results.py``.
 """
 
 import argparse

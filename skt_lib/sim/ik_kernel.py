@@ -12,8 +12,6 @@ beside this file, or ``NUMBA_CACHE_DIR``).
 import numpy as np
 from numba import njit
 
-_EYE6 = np.eye(6)
-
 
 @njit(cache=True)
 def _mul44(a, b):

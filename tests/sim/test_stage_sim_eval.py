@@ -16,7 +16,6 @@ from skt_lib.geometry.skt import resample
 from skt_lib.perception.views import RENDER_SPEC
 from skt_lib.schemas import SKTS, TRIALS
 from skt_lib.sim.execute import REASONS, run_trial
-from stages import sim_eval
 
 METHODS = ("oracle", "oracle_floating", "template_only", "sctdn", "kpam")
 
