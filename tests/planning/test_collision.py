@@ -4,6 +4,8 @@ support samples inside the object (reverse direction) and the wall plane x = 0."
 import numpy as np
 import pytest
 
+from scipy.spatial.transform import Rotation
+
 from skt_lib.geometry.convex import box, union
 from skt_lib.geometry.se3 import pose_matrix
 from skt_lib.planning.collision import MeshClearance, surface_samples
@@ -64,3 +66,28 @@ def test_object_behind_the_wall_is_found_by_the_wall_plane_only():
     assert check.clearance(touching) == pytest.approx(0.0001, abs=1e-9)
     free = pose_matrix([0.05, 0.0, 0.0], [0, 0, 0, 1])
     assert check.clearance(free) == pytest.approx(0.006)  # capped at 6 mm
+
+
+def test_pruned_clearance_equals_moving_every_sample_bit_for_bit():
+    """Cells out of reach are skipped (collision._Cells); the result must not move by a bit,
+    on a sweep that goes from free through grazing into deep penetration, rotating."""
+    rod = union([box([0.06, 0.0, 0.0], [0.06, 0.003, 0.003]),   # an arm out of the wall
+                 box([0.118, 0.0, 0.02], [0.003, 0.003, 0.02])])  # and its upturned tip
+    ring = _ring()
+    check = MeshClearance(rod, ring, SPACING)
+    rng, values = np.random.default_rng(3), []
+    for trial in range(6):
+        n = 60
+        wall = trial >= 4  # the last two: beside the rod, toward and into the wall plane
+        xs = np.linspace(0.05, 0.025, n) if wall else np.linspace(0.16, 0.06, n)
+        poses = np.repeat(np.eye(4)[None], n, 0)
+        poses[:, :3, :3] = Rotation.from_rotvec(
+            np.outer(np.linspace(0, 1, n), rng.normal(0, 0.6, 3))).as_matrix()
+        poses[:, :3, 3] = np.c_[xs, rng.normal(0, 0.004, n) + 0.024 * (trial % 2) + 0.08 * wall,
+                                np.full(n, 0.002 * trial)]
+        assert check.clearance(poses, chunk=17) == check.clearance_naive(poses)
+        each = [(check.clearance(q), check.clearance_naive(q)) for q in poses]
+        assert [f for f, _ in each] == [r for _, r in each], trial
+        values += [r for _, r in each]
+    # grazing poses too, not only deep ones and caps: where skipping decides
+    assert min(values) < -0.003 and sum(0 < v < 0.006 for v in values) > 20
