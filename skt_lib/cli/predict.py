@@ -7,12 +7,14 @@ by the same farthest-point sampling and shuffle as every training view
 (schema in README, "Command line").
 """
 
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from skt_lib.cli.cloud_checks import check_support_cloud
 from skt_lib.cli.common import UNITS, load_predictor, progress, read_cloud, read_frame
 from skt_lib.errors import InputError
 from skt_lib.geometry.se3 import matrix_to_quat, transform_points
@@ -20,7 +22,7 @@ from skt_lib.io import write_json_atomic
 from skt_lib.learning.predictor import Skt, SktPredictor
 from skt_lib.perception.pointcloud import clean_cloud, median_radius, sample_to
 
-SCHEMA, SCHEMA_VERSION = "skt", 1
+SCHEMA, SCHEMA_VERSION = "skt", 2
 #: A cloud said to be in millimetres whose median radius is below this (m) was in metres.
 MIN_MEDIAN_RADIUS_M = 0.002
 
@@ -34,13 +36,16 @@ class Prediction:
     skt: Skt
     points: np.ndarray  # (N, 3) the cloud the model saw, support frame, metres
     counts: dict  # cleaning: points in and removed per step
+    warnings: tuple[str, ...] = ()  # the cloud does not look like a training view (cloud_checks)
 
 
 def prepare_cloud(points: np.ndarray, n: int, units: str = "m", frame: np.ndarray | None = None,
-                  seed: int = 0, name: str = "points") -> tuple[np.ndarray, dict]:
+                  seed: int = 0, name: str = "points") -> tuple[np.ndarray, dict, list[str]]:
     """A raw cloud ``(K, 3)`` in ``units`` (camera frame when ``frame`` is the 4×4
     camera-to-support transform, else support frame) → ``(n, 3)`` support frame, metres,
-    cleaned and sampled as the model's training views were; and the cleaning counts."""
+    cleaned and sampled as the model's training views were; the cleaning counts; and the
+    warnings of :func:`~skt_lib.cli.cloud_checks.check_support_cloud`, which refuses
+    (:class:`InputError`) a cloud with no structure off the wall."""
     a = np.asarray(points, dtype=np.float64) * UNITS[units]
     if frame is not None:
         a = transform_points(frame, a)
@@ -52,15 +57,16 @@ def prepare_cloud(points: np.ndarray, n: int, units: str = "m", frame: np.ndarra
         raise InputError(f"{name}: median radius {median_radius(cleaned.points) * 1000:.3g} mm "
                          "after conversion from millimetres — was it in metres already? "
                          "(drop --units mm)")
+    warnings = check_support_cloud(cleaned.points, name)
     rng = np.random.default_rng(seed)
-    return sample_to(cleaned.points, n, rng), {**cleaned.counts, "n_points": n}
+    return sample_to(cleaned.points, n, rng), {**cleaned.counts, "n_points": n}, warnings
 
 
 def predict_cloud(predictor: SktPredictor, points: np.ndarray, units: str = "m",
                   frame: np.ndarray | None = None, seed: int = 0, name: str = "points"
                   ) -> Prediction:
-    cloud, counts = prepare_cloud(points, predictor.cfg.n_points, units, frame, seed, name)
-    return Prediction(predictor.predict(cloud), cloud, counts)
+    cloud, counts, warnings = prepare_cloud(points, predictor.cfg.n_points, units, frame, seed, name)
+    return Prediction(predictor.predict(cloud), cloud, counts, tuple(warnings))
 
 
 def skt_record(pred: Prediction, source: str, model: str) -> dict:
@@ -78,6 +84,11 @@ def skt_record(pred: Prediction, source: str, model: str) -> dict:
         "points": pred.points.tolist(),
         "affordance": np.asarray(skt.affordance, dtype=np.float64).tolist(),
         "cleaning": pred.counts,
+        "confidence": {  # a controller may decline an SKT below its own thresholds
+            "family_probability": skt.family_probability,
+            "affordance_peak": float(np.max(skt.affordance)),
+        },
+        "warnings": list(pred.warnings),
     }
 
 
@@ -127,9 +138,12 @@ def run(args) -> int:
             log_prediction(Path(args.rrd), pred, template.positions)
         write_json_atomic(args.output, record)
         bar.update()
+    for w in pred.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     c = np.round(pred.skt.contact, 4).tolist()
     print(f"{args.output}: SKT of {record['T']} waypoints, family {pred.skt.family}, contact {c} m "
           f"(cleaning kept {len(pred.points)} of {pred.counts['n_in']} points: "
           f"{pred.counts['non_finite']} non-finite, {pred.counts['outliers']} outliers, "
-          f"{pred.counts['off_cluster']} off the structure)")
+          f"{pred.counts['off_cluster']} off the structure); family probability "
+          f"{pred.skt.family_probability:.2f}, affordance peak {np.max(pred.skt.affordance):.2f}")
     return 0

@@ -30,6 +30,8 @@ class Skt:
     family: int
     contact: np.ndarray  # (3,) predicted contact point
     affordance: np.ndarray  # (N,) per input point (after resampling to n_points)
+    #: the classifier's softmax probability of ``family`` (NaN where no classifier chose it)
+    family_probability: float = float("nan")
 
 
 class SktPredictor:
@@ -75,5 +77,6 @@ class SktPredictor:
                          torch.as_tensor([s], dtype=torch.float32))
         positions = out["trajectory" if deform else "aligned"][0].double().numpy() * s + c
         aff = out["affordance"][0].numpy()
+        probs = torch.softmax(out["logits"][0].double(), -1)
         return Skt(positions, skt_frames(positions), int(out["logits"][0].argmax()),
-                   pts[int(aff.argmax())], aff)
+                   pts[int(aff.argmax())], aff, float(probs.max()))

@@ -26,6 +26,12 @@ def _write(path, data: bytes):
     return path
 
 
+def _bare_wall():
+    """A scan of the wall alone: 3000 points on x = 0 (1 mm noise), 30 × 30 cm."""
+    rng = np.random.default_rng(4)
+    return np.c_[rng.normal(0, 0.001, 3000), rng.uniform(-0.15, 0.15, (3000, 2))]
+
+
 def _corrupt_model(t, d):
     m = t / "model"
     m.mkdir()
@@ -61,6 +67,8 @@ ROWS = {
     "all views of a render_views NPZ": lambda t, d, v, p: (
         _predict(_npz(t / "x.npz", points=np.stack([v, v])), d),
         "x.npz: expected an (N, 3) array of x, y, z, got shape (2, 1000, 3)"),
+    "a cloud of a bare wall, no hook": lambda t, d, v, p: (
+        _predict(_npy(t / "wall.npy", _bare_wall()), d), "wall.npy: no structure stands off the wall"),
     "frame not rigid": lambda t, d, v, p: (
         _predict(_npy(t / "x.npy", v), d, "--frame", _json(t / "f.json", (2 * np.eye(4)).tolist())),
         "f.json: not a rigid transform"),

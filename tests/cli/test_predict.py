@@ -27,9 +27,9 @@ def test_predict_ply_and_npy_give_the_models_skt(capsys, data_root, view, tmp_pa
     assert a["waypoints"] == b["waypoints"] and a["affordance"] == b["affordance"]
     # exactly the predictor's answer on the cloud as the CLI prepares it
     predictor = SktPredictor.load(data_root / "train")
-    cloud, counts = prepare_cloud(view, predictor.cfg.n_points)
+    cloud, counts, warnings = prepare_cloud(view, predictor.cfg.n_points)
     skt = predictor.predict(cloud)
-    assert a["schema"] == "skt" and a["schema_version"] == 1 and a["T"] == predictor.cfg.T
+    assert a["schema"] == "skt" and a["schema_version"] == 2 and a["T"] == predictor.cfg.T
     pos = np.array([w["position"] for w in a["waypoints"]])
     np.testing.assert_allclose(pos, skt.positions, atol=1e-12)
     rot = np.stack([quat_to_matrix(w["quat"]) for w in a["waypoints"]])
@@ -38,7 +38,10 @@ def test_predict_ply_and_npy_give_the_models_skt(capsys, data_root, view, tmp_pa
     assert np.asarray(a["points"]).shape == (predictor.cfg.n_points, 3)
     assert len(a["affordance"]) == predictor.cfg.n_points
     assert a["contact_point"] in a["points"]  # the contact is a cloud point
-    assert a["cleaning"] == counts
+    assert a["cleaning"] == counts and a["warnings"] == warnings == []
+    assert a["confidence"] == {"family_probability": skt.family_probability,
+                               "affordance_peak": float(np.max(skt.affordance))}
+    assert 1 / 5 < skt.family_probability <= 1  # a probability, above chance (k = 5 families)
     assert (tmp_path / "a.rrd").stat().st_size > 0
 
 
@@ -104,3 +107,32 @@ def test_help_has_examples(capsys, args):
         main(args)
     assert e.value.code == 0
     assert "example" in capsys.readouterr().out
+
+
+def test_a_cloud_in_a_camera_frame_or_turned_is_predicted_with_a_warning(capsys, data_root,
+                                                                         view, tmp_path):
+    """5 m away (no --frame), or turned so that z points out of the wall (a camera's optical
+    axis): a warning in the JSON and on stderr, one line each; a training-like view has none."""
+    far = view + np.array([5.0, 0.0, 0.0])
+    turned = view @ np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]).T  # 90° about y: x → -z
+    for name, cloud, says in (("far", far, "5.0"), ("turned", turned, "behind the wall plane")):
+        np.save(tmp_path / f"{name}.npy", cloud)
+        rc, _, err = run_skt(capsys, "predict", tmp_path / f"{name}.npy", "--model",
+                             data_root / "train", "-o", tmp_path / f"{name}.json")
+        got = json.loads((tmp_path / f"{name}.json").read_text())
+        assert rc == 0 and len(got["warnings"]) == 1 and says in got["warnings"][0], got["warnings"]
+        assert f"{name}.npy" in got["warnings"][0]
+        assert [ln for ln in err.splitlines() if ln.startswith("warning:")] == \
+            [f"warning: {got['warnings'][0]}"]
+
+
+def test_training_views_pass_the_cloud_checks(tiny_dataset):
+    """Every rendered view of the tiny pipeline: no warning, no refusal."""
+    from skt_lib.cli.cloud_checks import check_support_cloud
+    from skt_lib.io import read_npz
+    from skt_lib.perception.views import RENDER_SPEC
+
+    _, data, _ = tiny_dataset
+    views = [v for f in sorted((data / "render_views").glob("*.npz"))
+             for v in read_npz(f, RENDER_SPEC)["points"]]
+    assert len(views) >= 42 and all(check_support_cloud(v) == [] for v in views)
