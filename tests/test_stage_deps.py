@@ -31,3 +31,20 @@ def test_a_module_imported_two_steps_away_is_missing_until_listed(tmp_path):
     assert tmp_path / "skt_lib/__init__.py" not in closure("stages.train", tmp_path)  # docstring only
     _write(tmp_path, "dvc.yaml", stage + "      - skt_lib\n")
     assert missing(tmp_path) == {}
+
+
+def test_caches_beside_the_code_are_not_part_of_a_dep():
+    """numba writes its cache (*.nbi, *.nbc) into __pycache__ beside the source; in a dep
+    directory's hash it made dvc.lock differ on every machine (skt_lib/sim: 52 files here,
+    22 on a fresh clone)."""
+    import subprocess
+    import sys
+
+    dvc = Path(sys.executable).with_name("dvc")
+    for path in ("skt_lib/sim/__pycache__/ik_kernel.solve-179.py311.nbi",
+                 "skt_lib/learning/__pycache__/predictor.cpython-311.pyc"):
+        out = subprocess.run([str(dvc), "check-ignore", path], cwd=ROOT, capture_output=True,
+                             text=True)
+        assert out.returncode == 0 and out.stdout.strip() == path, (path, out.stderr)
+    assert subprocess.run([str(dvc), "check-ignore", "skt_lib/sim/ik_kernel.py"],
+                          cwd=ROOT, capture_output=True).returncode == 1
