@@ -24,11 +24,13 @@ def test_a_module_imported_two_steps_away_is_missing_until_listed(tmp_path):
     _write(tmp_path, "skt_lib/learning/fit.py", "import numpy\nfrom skt_lib import seeding\n")
     _write(tmp_path, "skt_lib/seeding.py", "")
     _write(tmp_path, "skt_lib/io.py", "")
-    stage = "stages:\n  train:\n    cmd: python -m stages.train\n    deps:\n      - stages/train.py\n"
+    stage = ("stages:\n  train:\n    cmd: python -m stages.train\n"
+             "    deps:\n      - stages/train.py\n")
     _write(tmp_path, "dvc.yaml", stage + "      - skt_lib/learning\n")
     # the package's __init__ runs and imports io; seeding comes in through a from-import
     assert missing(tmp_path) == {"train": ["skt_lib/io.py", "skt_lib/seeding.py"]}
-    assert tmp_path / "skt_lib/__init__.py" not in closure("stages.train", tmp_path)  # docstring only
+    # an __init__ with a docstring and __version__ only decides nothing
+    assert tmp_path / "skt_lib/__init__.py" not in closure("stages.train", tmp_path)
     _write(tmp_path, "dvc.yaml", stage + "      - skt_lib\n")
     assert missing(tmp_path) == {}
 

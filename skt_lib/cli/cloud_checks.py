@@ -47,8 +47,8 @@ def check_support_cloud(points: np.ndarray, name: str = "points") -> list[str]:
     behind = float(np.mean(pts[:, 0] < -BEHIND_M))
     if behind > BEHIND_SHARE:
         warnings.append(
-            f"{name}: {100 * behind:.0f} % of its points lie behind the wall plane x = 0 — its axes "
-            "may not be the support frame's (x out of the wall, z up)")
+            f"{name}: {100 * behind:.0f} % of its points lie behind the wall plane x = 0 — "
+            "its axes may not be the support frame's (x out of the wall, z up)")
     off = float(np.mean(pts[:, 0] > OFF_WALL_M))
     if off < MIN_OFF_WALL_SHARE and dist <= FAR_M:
         raise InputError(

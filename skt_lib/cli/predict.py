@@ -65,7 +65,8 @@ def prepare_cloud(points: np.ndarray, n: int, units: str = "m", frame: np.ndarra
 def predict_cloud(predictor: SktPredictor, points: np.ndarray, units: str = "m",
                   frame: np.ndarray | None = None, seed: int = 0, name: str = "points"
                   ) -> Prediction:
-    cloud, counts, warnings = prepare_cloud(points, predictor.cfg.n_points, units, frame, seed, name)
+    cloud, counts, warnings = prepare_cloud(points, predictor.cfg.n_points, units, frame, seed,
+                                            name)
     return Prediction(predictor.predict(cloud), cloud, counts, tuple(warnings))
 
 

@@ -63,13 +63,15 @@ class MeshClearance:
             keep = (d <= reach) | (moved[..., 0] - self._obj_cells.radii <= shell)
             n, k = self._obj_cells.members(keep)
             obj = np.einsum("nij,nj->ni", rot[n], self._obj_cells.points[k]) + part[n, :3, 3]
-            best = min(best, shell, float(obj[:, 0].min(initial=np.inf)), self._support.signed_min(obj))
+            best = min(best, shell, float(obj[:, 0].min(initial=np.inf)),
+                       self._support.signed_min(obj))
             # support samples within the object's reach (+ 5 mm), in the object frame
             inv_r = np.transpose(rot, (0, 2, 1))
             local = np.einsum("nij,nkj->nki", inv_r, self._sup_cells.centres[None] - shift)
             d = self._sup_cells.distance(local, self._object.samples, reach)
             ball = self._obj_radius + 0.005
-            off = np.linalg.norm(self._sup_cells.centres[None] - shift, axis=2) - self._sup_cells.radii
+            off = (np.linalg.norm(self._sup_cells.centres[None] - shift, axis=2)
+                   - self._sup_cells.radii)
             n, k = self._sup_cells.members((d <= reach) & (off <= ball))
             rel = self._sup_cells.points[k] - part[n, :3, 3]
             inside = np.einsum("ni,ni->n", rel, rel) <= ball * ball  # the ball of the full check
@@ -124,7 +126,8 @@ class _Cells:
     def distance(self, centres: np.ndarray, other: cKDTree, reach: float) -> np.ndarray:
         """``(N, G)``: distance of each moved centre ``(N, G, 3)`` to ``other``'s nearest
         sample, less the cell's radius (``inf`` beyond ``reach``)."""
-        d, _ = other.query(centres.reshape(-1, 3), distance_upper_bound=float(self.radii.max()) + reach)
+        d, _ = other.query(centres.reshape(-1, 3),
+                           distance_upper_bound=float(self.radii.max()) + reach)
         return d.reshape(centres.shape[:2]) - self.radii
 
     def members(self, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -3,7 +3,6 @@ support samples inside the object (reverse direction) and the wall plane x = 0."
 
 import numpy as np
 import pytest
-
 from scipy.spatial.transform import Rotation
 
 from skt_lib.geometry.convex import box, union
