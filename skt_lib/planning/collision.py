@@ -49,8 +49,8 @@ class MeshClearance:
         Poses are taken ``chunk`` at a time (memory stays bounded on long sweeps).
 
         Only samples of cells (:class:`_Cells`) that can come within reach are moved: the
-        result is exactly that of moving every sample (``tests/planning/test_collision.py``
-        holds the two equal, bit for bit, on stored SKTs)."""
+        result is exactly that of moving every sample (:meth:`clearance_naive`;
+        ``tests/planning/test_collision.py`` holds the two equal, bit for bit, pose by pose)."""
         poses = np.asarray(poses).reshape(-1, 4, 4)
         shell, reach = self._support.shell, self._support.shell + self._support.spacing
         best = np.inf
@@ -80,7 +80,6 @@ class MeshClearance:
                 local = np.einsum("nij,nj->ni", inv_r[n], rel)
                 best = min(best, self._object.signed_min(local))
         return best
-
 
     def clearance_naive(self, poses: np.ndarray) -> float:
         """:meth:`clearance` moving every sample of both meshes (the reference it equals)."""
