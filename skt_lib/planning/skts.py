@@ -75,13 +75,12 @@ def _objects(mg: Path, objects, keypoints) -> dict[str, SktObject]:
     return out
 
 
-def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams, T: int) -> list[SktTask]:
-    """One task per support with a hanging pose, from the artifacts under ``root`` (the
-    ``data/`` folder): mesh_gen, contact_sim and rotation_extraction outputs."""
+def load_probe_objects(root: Path) -> tuple[SktObject, tuple[SktObject, ...],
+                                            tuple[SktObject, ...]]:
+    """(reference, training objects, test objects) with their keypoints, from the artifacts
+    under ``root`` (the ``data/`` folder): mesh_gen and rotation_extraction outputs."""
     mg = root / "mesh_gen"
-    supports = read_table(mg / "supports.parquet", SUPPORTS).set_index("support_id")
     objects = read_table(mg / "objects.parquet", OBJECTS)
-    contacts = read_table(root / "contact_sim" / "contacts.parquet", CONTACTS)
     keypoints = read_table(root / "rotation_extraction" / "keypoints.parquet", KEYPOINTS)
     by_id = _objects(mg, objects, keypoints.set_index("object_id"))
     ref_ids = objects[objects["is_reference"]]["object_id"].tolist()
@@ -91,10 +90,20 @@ def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams, T: int) -> list[SktT
     real = objects[~objects["is_reference"]]
     train = tuple(by_id[i] for i in real[real["split"] == "train"]["object_id"] if i in by_id)
     test = tuple(by_id[i] for i in real[real["split"] == "test"]["object_id"] if i in by_id)
+    return by_id[ref_ids[0]], train, test
+
+
+def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams, T: int) -> list[SktTask]:
+    """One task per support with a hanging pose, from the artifacts under ``root`` (the
+    ``data/`` folder): mesh_gen, contact_sim and rotation_extraction outputs."""
+    mg = root / "mesh_gen"
+    supports = read_table(mg / "supports.parquet", SUPPORTS).set_index("support_id")
+    contacts = read_table(root / "contact_sim" / "contacts.parquet", CONTACTS)
+    reference, train, test = load_probe_objects(root)
     hangs = contacts[(contacts["kind"] == "reference_on_support") & contacts["ok"]]
     return [SktTask(h.support_id, supports.loc[h.support_id, "split"],
                     str(mg / supports.loc[h.support_id, "urdf_path"]),
-                    str(mg / supports.loc[h.support_id, "mesh_path"]), by_id[ref_ids[0]], train, test,
+                    str(mg / supports.loc[h.support_id, "mesh_path"]), reference, train, test,
                     tuple(h.hang_position), tuple(h.hang_quat), seed, T, p)
             for h in hangs.itertuples()]
 
