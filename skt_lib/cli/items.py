@@ -11,10 +11,10 @@ from skt_lib.errors import DataError, InputError
 from skt_lib.eval.protocol import TestObject, TestSupport
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
+from skt_lib.geometry.skt import resample
 from skt_lib.io import read_table
 from skt_lib.perception.render import DepthRenderer
 from skt_lib.perception.views import render_view, support_cameras
-from skt_lib.geometry.skt import resample
 from skt_lib.schemas import KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from skt_lib.sim.grasp import grasp_candidates
@@ -54,9 +54,10 @@ def find_support(name: str, root: Path, params) -> TestSupport:
     if (d / SUPPORT_RECORD).is_file():
         rec = _record(d / SUPPORT_RECORD)
         mesh, urdf = str(d / "visual.obj"), str(d / f"{name}.urdf")
-        gt = resample(np.asarray(rec["gt_skt"], float), T)
+        gt, *others = [resample(np.asarray(k, float), T) for k in rec.get("skts", [rec["gt_skt"]])]
         cloud, view = render_cloud(mesh, name, params)
-        return TestSupport(name, "user", "user", urdf, mesh, gt, cloud, view)
+        return TestSupport(name, rec.get("difficulty", "user"), "user", urdf, mesh, gt, cloud,
+                           view, tuple(others))
     mg = root / "mesh_gen"
     supports = read_table(mg / "supports.parquet", SUPPORTS).set_index("support_id")
     if name not in supports.index:
@@ -68,11 +69,11 @@ def find_support(name: str, root: Path, params) -> TestSupport:
     if mine.empty:
         raise InputError(f"{name}: has no ground-truth SKT in {root / 'rrt_skts' / 'skts.parquet'} "
                          "(the planner failed on it); pick another support")
-    gt = resample(np.stack(mine.iloc[0]["keypoints"]), T)
+    gt, *others = [resample(np.stack(k), T) for k in mine["keypoints"]]
     mesh = str(mg / s["mesh_path"])
     cloud, view = render_cloud(mesh, name, params)
     return TestSupport(name, s["difficulty"], s["family"], str(mg / s["urdf_path"]), mesh, gt,
-                       cloud, view)
+                       cloud, view, tuple(others))
 
 
 def test_object(object_id: str, category: str, urdf: str, mesh_path: str, keypoint: np.ndarray,

@@ -11,7 +11,7 @@ import sys
 import traceback
 from collections.abc import Sequence
 
-from skt_lib.cli import hang, import_mesh, predict
+from skt_lib.cli import hang, import_mesh, import_support, predict
 from skt_lib.cli.common import EXIT_BAD_INPUT
 from skt_lib.errors import SktError
 
@@ -34,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
                  epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--debug", action="store_true", help="show tracebacks of expected errors")
     sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
-    for module in (predict, import_mesh, hang):
+    for module in (predict, import_mesh, import_support, hang):
         module.add_parser(sub)
     for p in sub.choices.values():
         p.formatter_class = argparse.RawDescriptionHelpFormatter

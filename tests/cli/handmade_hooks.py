@@ -1,0 +1,49 @@
+"""Two hook meshes no ``mesh_gen`` family makes, built with trimesh (support frame, metres):
+a coat hook with two prongs at different heights and an open ring on a stem."""
+
+import numpy as np
+import trimesh
+
+
+def _union(parts) -> trimesh.Trimesh:
+    return trimesh.boolean.union(parts, engine="manifold")
+
+
+def _plate(z_lo: float, z_hi: float) -> trimesh.Trimesh:
+    plate = trimesh.creation.box(extents=(0.01, 0.04, z_hi - z_lo))
+    plate.apply_translation((0.005, 0.0, (z_lo + z_hi) / 2))
+    return plate
+
+
+def coat_hook() -> trimesh.Trimesh:
+    """A plate with a long lower prong rising 12° to a ball end and a short upper prong at 40°."""
+    lower = trimesh.creation.cylinder(0.005, segment=[(0.005, 0, 0.0), (0.075, 0, 0.015)],
+                                      sections=32)
+    ball = trimesh.creation.icosphere(3, 0.008)
+    ball.apply_translation((0.075, 0, 0.015))
+    upper = trimesh.creation.cylinder(0.004, segment=[(0.005, 0, 0.05), (0.045, 0, 0.084)],
+                                      sections=32)
+    return _union([_plate(-0.02, 0.07), lower, ball, upper])
+
+
+def _tube(points: np.ndarray, radius: float) -> list[trimesh.Trimesh]:
+    """Cylinders between consecutive ``points`` and balls at the joints."""
+    parts = [trimesh.creation.cylinder(radius, segment=[a, b], sections=24)
+             for a, b in zip(points[:-1], points[1:])]
+    for p in points:
+        ball = trimesh.creation.icosphere(2, radius)
+        ball.apply_translation(p)
+        parts.append(ball)
+    return parts
+
+
+def ring_hook(gap_deg: float = 80.0) -> trimesh.Trimesh:
+    """A stem out of the wall ending in a vertical ring (x–z plane, 22 mm radius) that is
+    open at the top: from the stem it runs down, round the front and up, stopping
+    ``gap_deg`` short of the stem's side; objects enter through the opening."""
+    stem = trimesh.creation.cylinder(0.005, segment=[(0.005, 0, 0.0), (0.04, 0, 0.0)],
+                                     sections=32)
+    centre, rho = np.array([0.062, 0.0, 0.0]), 0.022
+    angles = np.radians(np.arange(180.0, 180.0 + 360.0 - gap_deg + 1e-9, 10.0))
+    arc = centre + rho * np.stack([np.cos(angles), np.zeros_like(angles), np.sin(angles)], 1)
+    return _union([_plate(-0.03, 0.03), stem, *_tube(arc, 0.0045)])
