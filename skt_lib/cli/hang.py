@@ -3,16 +3,22 @@
 The support is rendered from one view (as ``sim_eval`` gives it to the methods), the method
 predicts the SKT, and the trial runs with ``sim_eval``'s executor and strict predicate
 (:func:`skt_lib.sim.execute.run_trial`). Prints the verdict and failure reason; ``--rrd``
-writes the rollout (robot, object, support, SKT) to Rerun.
+writes the rollout (robot, object, support, SKT) to Rerun. A mesh file given for
+``--support`` or ``--object`` is imported first, as ``skt import-support`` /
+``skt import-object`` would (named after the file): into a temporary data root that links
+the real one's folders, or into the real one with ``--keep``.
 """
 
+import os
+import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from skt_lib.cli.common import load_predictor, progress
-from skt_lib.cli.items import find_object, find_support
+from skt_lib.cli.items import USER, find_object, find_support, user_dir
 from skt_lib.config import load_params
 from skt_lib.errors import InputError
 from skt_lib.eval.methods import LEARNED, make_method
@@ -20,19 +26,27 @@ from skt_lib.eval.protocol import make_task, trial_settings
 from skt_lib.sim.execute import run_trial
 
 METHODS = ("sctdn", "template_only", "oracle", "oracle_floating", "kpam")
+MESH_SUFFIXES = {".obj", ".stl", ".ply", ".glb", ".gltf", ".off"}
 EXAMPLE = """example:
   skt hang --support support_00003 --object object_mug_001 --method sctdn --rrd hang.rrd
-  skt hang --support my_hook --object my_mug --method oracle   # imported with skt import-*"""
+  skt hang --support my_hook --object my_mug --method oracle   # imported with skt import-*
+  skt hang --support hook.stl --object mug.obj --units mm      # imported on the fly"""
 
 
 def add_parser(sub) -> None:
     ap = sub.add_parser("hang", help="hang an object on a support in simulation and record it",
                         description=__doc__.splitlines()[0], epilog=EXAMPLE)
     ap.add_argument("--support", required=True,
-                    help="a mesh_gen support id or the name of an imported support")
+                    help="a mesh_gen support id, an imported support's name, or a mesh file")
     ap.add_argument("--object", required=True,
-                    help="a mesh_gen object id or the name of an imported object")
-    ap.add_argument("--method", choices=METHODS, default="sctdn", help="SKT method (default: sctdn)")
+                    help="a mesh_gen object id, an imported object's name, or a mesh file")
+    ap.add_argument("--units", choices=("m", "mm"), default="m",
+                    help="units of mesh files given for --support/--object (default: m)")
+    ap.add_argument("--keep", action="store_true",
+                    help="keep mesh files' imports in <data-root>/user/ (default: a temporary "
+                         "folder)")
+    ap.add_argument("--method", choices=METHODS, default="sctdn",
+                    help="SKT method (default: sctdn)")
     ap.add_argument("--params", default="params.yaml", help="params file (default: params.yaml)")
     ap.add_argument("--data-root", default="data", help="pipeline artifacts (default: data)")
     ap.add_argument("--model", help="trained model folder (default: <data-root>/train)")
@@ -58,9 +72,65 @@ def hang(support, obj, method: str, params, model_dir: Path | None, record_every
     return {"task": task, **run_trial(task)}
 
 
+def is_mesh(value: str) -> bool:
+    return Path(value).suffix.lower() in MESH_SUFFIXES and Path(value).is_file()
+
+
+def overlay(root: Path, tmp: Path, skip: set[tuple[str, str]]) -> Path:
+    """A data root in ``tmp`` whose folders link ``root``'s, imports included, except the
+    ``(kind, name)`` imports in ``skip``: what is imported into it stays out of ``root``."""
+    out = tmp / "data"
+    out.mkdir()
+    for entry in root.iterdir() if root.is_dir() else ():
+        if entry.name != USER:
+            os.symlink(entry.resolve(), out / entry.name)
+    for kind in ("support", "object"):
+        mine = user_dir(out, kind, "x").parent
+        mine.mkdir(parents=True)
+        theirs = user_dir(root, kind, "x").parent
+        for entry in theirs.iterdir() if theirs.is_dir() else ():
+            if (kind, entry.name) not in skip:
+                os.symlink(entry.resolve(), mine / entry.name)
+    return out
+
+
+def import_meshes(args, params, root: Path) -> None:
+    """Import the mesh files among ``--support``/``--object`` into ``root``; the arguments
+    become their names."""
+    from skt_lib.cli import import_mesh, import_support
+
+    for kind, do_import in (("support", import_support.import_support),
+                            ("object", import_mesh.import_object)):
+        path = getattr(args, kind)
+        if not is_mesh(path):
+            continue
+        name = Path(path).stem
+        if not name.replace("_", "").replace("-", "").isalnum():
+            raise InputError(f"{path}: name the file with letters, digits, '_' or '-'")
+        if user_dir(root, kind, name).exists():
+            raise InputError(f"{user_dir(root, kind, name)}: a {kind} named {name!r} is already "
+                             "imported (hang it by name, or drop --keep)")
+        ns = SimpleNamespace(mesh=path, name=name, units=args.units, data_root=root, mount=None,
+                             out_axis=None, arm=None, aperture_point=None, aperture_axis=None)
+        with progress(5, f"import {kind}") as bar:
+            do_import(ns, params, bar)
+        setattr(args, kind, name)
+
+
 def run(args) -> int:
     params = load_params(args.params)
-    root = Path(args.data_root)
+    if args.keep or not (is_mesh(args.support) or is_mesh(args.object)):
+        import_meshes(args, params, Path(args.data_root))
+        return _run(args, params, Path(args.data_root))
+    skip = {(k, Path(v).stem) for k, v in (("support", args.support), ("object", args.object))
+            if is_mesh(v)}
+    with tempfile.TemporaryDirectory(prefix="skt-hang-") as tmp:
+        root = overlay(Path(args.data_root), Path(tmp), skip)
+        import_meshes(args, params, root)
+        return _run(args, params, root)
+
+
+def _run(args, params, root: Path) -> int:
     model = Path(args.model) if args.model else root / "train"
     with progress(3, "hang") as bar:
         support = find_support(args.support, root, params)

@@ -41,9 +41,9 @@ def _import(capsys, mesh, name, params, data_root, *extra):
     return json.loads((d / "support.json").read_text()), out
 
 
-def _hang(capsys, support, obj, method, params, data_root) -> str:
+def _hang(capsys, support, obj, method, params, data_root, *extra) -> str:
     rc, out, err = run_skt(capsys, "hang", "--support", support, "--object", obj, "--method",
-                           method, "--params", params, "--data-root", data_root)
+                           method, "--params", params, "--data-root", data_root, *extra)
     assert rc == 0, err
     print(f"{method} {support} × {obj}: {out.strip()}")
     return out
@@ -159,3 +159,22 @@ def test_bad_meshes_are_refused_and_nothing_is_written(capsys, tmp_path, data_ro
                            tiny_dataset[0], "--data-root", data_root, *args)
     assert rc == 2 and message in err and err.count("\n") == 1, err
     assert tree_state(data_root) == before
+
+
+@pytest.mark.slow
+def test_hang_imports_mesh_files_on_the_fly(capsys, tmp_path, data_root, tiny_dataset):
+    """Mesh paths for --support and --object: imported into a temporary root (data/ left as
+    it was) or, with --keep, into data/user/."""
+    params = tiny_dataset[0]
+    hook = tmp_path / "fly_hook.stl"
+    coat_hook().export(hook)
+    before = tree_state(data_root)
+    out = _hang(capsys, hook, MUG, "oracle", params, data_root)
+    assert "fly_hook × mug: " in out
+    assert tree_state(data_root) == before
+    out = _hang(capsys, hook, OBJECT, "oracle", params, data_root, "--keep")
+    assert f"fly_hook × {OBJECT}: " in out
+    assert (data_root / "user" / "supports" / "fly_hook" / "support.json").is_file()
+    rc, _, err = run_skt(capsys, "hang", "--support", hook, "--object", OBJECT, "--params",
+                         params, "--data-root", data_root, "--keep")
+    assert rc == 2 and "already imported" in err
