@@ -278,6 +278,10 @@ class SimEvalParams(_Section):
     kpam_lift_m: float = Field(ge=0.0, le=0.05, description="kPAM baseline: release this high above the hang.")
     n_record: int = Field(ge=0, le=100, description="Rollouts per method recorded to Rerun.")
     record_every: int = Field(ge=1, le=1000, description="Physics steps between recorded frames.")
+    extra_supports: tuple[str, ...] = Field(
+        default=(), description="Imported supports (skt import-support names) evaluated as extra rows, never in Table I.")
+    extra_objects: tuple[str, ...] = Field(
+        default=(), description="Imported objects (skt import-object names) evaluated as extra rows, never in Table I.")
 
     @model_validator(mode="after")
     def _grasps(self) -> "SimEvalParams":

@@ -30,6 +30,7 @@ from skt_lib.eval.protocol import (
 )
 from skt_lib.eval.report import write_report
 from skt_lib.eval.rounds import pick_rollouts, replay, run_rounds
+from skt_lib.eval.user_items import load_user_items, run_user_trials, user_metrics
 from skt_lib.geometry.export import read_obj
 from skt_lib.io import write_table
 from skt_lib.schemas import TRIALS
@@ -67,8 +68,9 @@ def main(argv=None) -> int:
         return make_method(m, models.get(MODEL_OF.get(m)), s.gt, pre, p.kpam_lift_m, rng=rng,
                            n_proposals=p.n_proposals, omnihang=omni)
 
+    extra_s, extra_o, user_md5 = load_user_items(root, params)
     positions, seconds, made = predict_all({m: (lambda s, m=m: make(m, s)) for m in p.methods},
-                                           supports)
+                                           [*supports, *extra_s])
     settings = trial_settings(p, params.contact_sim)
     log.info("%d (method, test support, object) pairs: %d methods × %d test supports × %d "
              "objects; proposing methods run up to %d proposals per pair",
@@ -85,6 +87,8 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     rows, tasks = run_rounds(p.methods, supports, objects, positions, settings, run)
+    user_rows = run_user_trials(p.methods, supports, objects, extra_s, extra_o, positions,
+                                settings, run)
     wall = time.perf_counter() - t0
     out.mkdir(parents=True, exist_ok=True)
     write_table(out / "trials.parquet", rows, TRIALS)
@@ -96,6 +100,9 @@ def main(argv=None) -> int:
     metrics["n_test_supports"] = len(supports)
     metrics["n_test_supports_without_gt"] = len(missing)
     metrics["n_test_objects"] = len(objects)
+    if p.extra_supports or p.extra_objects:
+        write_table(out / "user_trials.parquet", user_rows, TRIALS)
+        metrics["user_items"] = user_metrics(user_rows, p.methods, user_md5)
     write_metrics(rep, metrics)
     write_run_log(Path(args.log_dir), "sim_eval", {
         "wall_s": wall, "n_trials": len(trials), "trials_per_min": 60 * len(trials) / wall,

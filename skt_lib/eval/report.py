@@ -50,7 +50,7 @@ def _rate_ci(success: pd.Series) -> str:
 
 
 def write_report(rep: Path, trials: pd.DataFrame, pairs: pd.DataFrame, metrics: dict, methods,
-                  supports, objects, missing, chosen: list[str]) -> None:
+                  supports, objects, missing, chosen: list[str]) -> Report:
     report = Report("sim_eval", rep)
     n = len(trials)
     report.text(
@@ -129,7 +129,16 @@ def write_report(rep: Path, trials: pd.DataFrame, pairs: pd.DataFrame, metrics: 
                 "each level (a success where there is one) and the first trial of each further "
                 "failure reason. The `trial` timeline shows each "
                 "trial's end state; scrub `step` to replay a rollout.")
+    if "user_items" in metrics:
+        from skt_lib.eval.user_items import user_table
+
+        user = metrics["user_items"]
+        report.heading("User items (sim_eval.extra_supports / extra_objects; not in Table I)")
+        report.text("Every method on every pair with an imported item: "
+                    + ", ".join(f"`{k}`" for k in user["records_md5"]) + ".")
+        report.table(["method", "pairs", "hung", "success %"], user_table(user, methods))
     report.write()
+    return report
 
 
 def _omnihang_note(metrics: dict) -> str:

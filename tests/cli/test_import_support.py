@@ -178,3 +178,55 @@ def test_hang_imports_mesh_files_on_the_fly(capsys, tmp_path, data_root, tiny_da
     rc, _, err = run_skt(capsys, "hang", "--support", hook, "--object", OBJECT, "--params",
                          params, "--data-root", data_root, "--keep")
     assert rc == 2 and "already imported" in err
+
+
+@pytest.mark.slow
+def test_sim_eval_evaluates_extra_items_apart_from_table_one(capsys, tmp_path, data_root,
+                                                              tiny_evaluated):
+    """sim_eval.extra_supports/extra_objects: every method on every pair with an imported item,
+    in user_trials.parquet and metrics' user_items; Table I's figures stay what they were."""
+    from stages import sim_eval
+
+    params, data0, out0, rep0 = tiny_evaluated
+    root = tmp_path / "data"  # the tiny pipeline's folders (baselines too) and the imports
+    root.mkdir()
+    for entry in data0.iterdir():
+        (root / entry.name).symlink_to(entry, target_is_directory=True)
+    (root / "user").symlink_to(data_root / "user", target_is_directory=True)
+    mesh = tmp_path / "coat.stl"
+    coat_hook().export(mesh)
+    _import(capsys, mesh, "extra_coat", params, data_root)
+    rc, _, err = run_skt(capsys, "import-object", MUG, "--name", "extra_mug", "--params", params,
+                         "--data-root", data_root)
+    assert rc == 0, err
+    data = yaml.safe_load(params.read_text())
+    data["sim_eval"]["extra_supports"], data["sim_eval"]["extra_objects"] = ["extra_coat"], \
+        ["extra_mug"]
+    extra = tmp_path / "params.yaml"
+    extra.write_text(yaml.safe_dump(data))
+    out, rep = tmp_path / "sim_eval", tmp_path / "reports"
+    assert sim_eval.main(["--params", str(extra), "--data-root", str(root), "--data-dir",
+                          str(out), "--reports-dir", str(rep), "--log-dir",
+                          str(tmp_path / "logs")]) == 0
+    # the generated test set's trials and Table I are untouched by the extra items
+    assert (out / "trials.parquet").read_bytes() == (out0 / "trials.parquet").read_bytes()
+    m0 = json.loads((rep0 / "metrics.json").read_text())
+    m1 = json.loads((rep / "metrics.json").read_text())
+    user = m1.pop("user_items")
+    assert m1 == m0
+    methods = data["sim_eval"]["methods"]
+    n_test_supports, n_test_objects = m0["n_test_supports"], m0["n_test_objects"]
+    pairs = (n_test_objects + 1) + n_test_supports  # the coat hook × (tests + mug); tests × mug
+    assert all(user[m]["n_pairs"] == pairs for m in methods)
+    assert set(user["records_md5"]) == {"support/extra_coat", "object/extra_mug"}
+    rows = read_table(out / "user_trials.parquet", TRIALS)
+    assert set(rows["support_id"]) >= {"extra_coat"} and set(rows["object_id"]) >= {"extra_mug"}
+    assert "User items" in (rep / "report.md").read_text()
+    # a name that was never imported: a clear error
+    data["sim_eval"]["extra_supports"] = ["no_such_hook"]
+    extra.write_text(yaml.safe_dump(data))
+    with pytest.raises(Exception, match="no_such_hook.*is not imported"):
+        sim_eval.main(["--params", str(extra), "--data-root", str(root), "--data-dir",
+                       str(tmp_path / "x"), "--reports-dir", str(tmp_path / "xr"), "--log-dir",
+                       str(tmp_path / "logs")])
+    assert not (tmp_path / "x" / "trials.parquet").exists()
