@@ -1,5 +1,12 @@
 """Two hook meshes no ``mesh_gen`` family makes, built with trimesh (support frame, metres):
-a coat hook with two prongs at different heights and an open ring on a stem."""
+a coat hook with two prongs at different heights and an open ring on a stem. The README's
+walk-through and the import tests use them.
+
+    .venv/bin/python -m tools.example_hooks [FOLDER]   # writes coat_hook.stl, ring_hook.stl
+"""
+
+import sys
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -47,3 +54,17 @@ def ring_hook(gap_deg: float = 80.0) -> trimesh.Trimesh:
     angles = np.radians(np.arange(180.0, 180.0 + 360.0 - gap_deg + 1e-9, 10.0))
     arc = centre + rho * np.stack([np.cos(angles), np.zeros_like(angles), np.sin(angles)], 1)
     return _union([_plate(-0.03, 0.03), stem, *_tube(arc, 0.0045)])
+
+
+def main(argv=None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    folder = Path(args[0] if args else ".")
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, build in (("coat_hook", coat_hook), ("ring_hook", ring_hook)):
+        build().export(folder / f"{name}.stl")
+        print(folder / f"{name}.stl")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
