@@ -104,12 +104,7 @@ def import_meshes(args, params, root: Path) -> None:
         path = getattr(args, kind)
         if not is_mesh(path):
             continue
-        name = Path(path).stem
-        if not name.replace("_", "").replace("-", "").isalnum():
-            raise InputError(f"{path}: name the file with letters, digits, '_' or '-'")
-        if user_dir(root, kind, name).exists():
-            raise InputError(f"{user_dir(root, kind, name)}: a {kind} named {name!r} is already "
-                             "imported (hang it by name, or drop --keep)")
+        name, _ = import_mesh.new_import(kind, path, None, root)
         ns = SimpleNamespace(mesh=path, name=name, units=args.units, data_root=root, mount=None,
                              out_axis=None, arm=None, aperture_point=None, aperture_axis=None)
         with progress(5, f"import {kind}") as bar:

@@ -42,18 +42,24 @@ EXAMPLE = """example:
   skt import-object part.stl --units mm --aperture-point 0 40 55 --aperture-axis 1 0 0"""
 
 
-def add_parser(sub) -> None:
-    ap = sub.add_parser("import-object", help="import a hangable object mesh (finds its aperture)",
-                        description=__doc__.splitlines()[0], epilog=EXAMPLE)
+def import_parser(sub, kind: str, help: str, description: str, example: str):
+    """The parser of ``skt import-<kind>`` with the options both import commands share."""
+    ap = sub.add_parser(f"import-{kind}", help=help, description=description, epilog=example)
     ap.add_argument("mesh", help="OBJ, STL, PLY, GLB… (anything trimesh reads)")
-    ap.add_argument("--name", help="name of the imported object (default: the file's stem)")
+    ap.add_argument("--name", help=f"name of the imported {kind} (default: the file's stem)")
     ap.add_argument("--units", choices=sorted(UNITS), default="m", help="units of the mesh")
+    ap.add_argument("--params", default="params.yaml", help="params file (default: params.yaml)")
+    ap.add_argument("--data-root", default="data", help="data folder (default: data)")
+    return ap
+
+
+def add_parser(sub) -> None:
+    ap = import_parser(sub, "object", "import a hangable object mesh (finds its aperture)",
+                       __doc__.splitlines()[0], EXAMPLE)
     ap.add_argument("--aperture-point", type=float, nargs=3, metavar=("X", "Y", "Z"),
                     help="centre of the hanging hole, mesh frame and units (with --aperture-axis)")
     ap.add_argument("--aperture-axis", type=float, nargs=3, metavar=("X", "Y", "Z"),
                     help="axis of the hanging hole, mesh frame")
-    ap.add_argument("--params", default="params.yaml", help="params file (default: params.yaml)")
-    ap.add_argument("--data-root", default="data", help="data folder (default: data)")
     ap.set_defaults(run=run)
 
 
@@ -137,21 +143,35 @@ def _move_into_place(tmp: Path, dest: Path) -> None:
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def run(args) -> int:
-    existing_file(args.mesh, "mesh")
-    args.name = args.name or Path(args.mesh).stem
-    if not args.name.replace("_", "").replace("-", "").isalnum():
-        raise InputError(f"--name: {args.name!r} must be letters, digits, '_' or '-'")
-    dest = user_dir(args.data_root, "object", args.name)
+def new_import(kind: str, mesh, name: str | None, data_root) -> tuple[str, Path]:
+    """(name, destination folder) of importing ``mesh`` as a ``kind`` ("support", "object"),
+    or :class:`InputError`: no such file, a bad name, or one already imported."""
+    existing_file(mesh, "mesh")
+    name = name or Path(mesh).stem
+    if not name.replace("_", "").replace("-", "").isalnum():
+        raise InputError(f"--name: {name!r} must be letters, digits, '_' or '-'")
+    dest = user_dir(data_root, kind, name)
     if dest.exists():
-        raise InputError(f"{dest}: an object named {args.name!r} is already imported "
-                         "(choose another --name or delete the folder)")
+        raise InputError(f"{dest}: {'an' if kind == 'object' else 'a'} {kind} named {name!r} is "
+                         "already imported (choose another --name or delete the folder)")
+    return name, dest
+
+
+def run_import(args, kind: str, do_import) -> tuple[Path, dict]:
+    """The import commands' common part: checks, params, ``do_import(args, params, bar)``
+    under a progress bar, the IoU warning; (destination, record)."""
+    args.name, dest = new_import(kind, args.mesh, args.name, args.data_root)
     params = load_params(args.params)
-    with progress(5, "import-object") as bar:
-        record = import_object(args, params, bar)
+    with progress(5, f"import-{kind}") as bar:
+        record = do_import(args, params, bar)
     if record["part_iou"] < IOU_WARN:
         sys.stderr.write(f"WARNING: {args.mesh}: convex parts cover the mesh with IoU "
                          f"{record['part_iou']:.3f} < {IOU_WARN}: collisions will be coarse\n")
+    return dest, record
+
+
+def run(args) -> int:
+    dest, record = run_import(args, "object", import_object)
     print(f"{dest}: imported {args.name} ({record['n_parts']} convex parts, IoU "
           f"{record['part_iou']:.3f}, aperture admits a {1000 * record['aperture_clearance_m']:.1f} "
           f"mm rod, {1000 * record['mass_kg']:.0f} g); hang it with "

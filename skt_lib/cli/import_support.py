@@ -14,16 +14,13 @@ views of ``render_views``. The result lives in ``<data-root>/user/supports/<name
 written only once everything has passed.
 """
 
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from skt_lib.cli.common import existing_file, progress
-from skt_lib.cli.import_mesh import IOU_WARN, _move_into_place
+from skt_lib.cli.import_mesh import _move_into_place, import_parser, run_import
 from skt_lib.cli.items import SUPPORT_RECORD, user_dir
-from skt_lib.config import load_params
 from skt_lib.errors import InputError, MeshError
 from skt_lib.geometry.build import SUPPORT_RGBA
 from skt_lib.geometry.centreline import mesh_difficulty
@@ -52,18 +49,13 @@ EXAMPLE = """example:
 
 
 def add_parser(sub) -> None:
-    ap = sub.add_parser("import-support", help="import a hook/peg/rack mesh (plans its SKTs)",
-                        description=__doc__.splitlines()[0], epilog=EXAMPLE)
-    ap.add_argument("mesh", help="OBJ, STL, PLY, GLB… (anything trimesh reads)")
-    ap.add_argument("--name", help="name of the imported support (default: the file's stem)")
-    ap.add_argument("--units", choices=sorted(UNITS), default="m", help="units of the mesh")
+    ap = import_parser(sub, "support", "import a hook/peg/rack mesh (plans its SKTs)",
+                       __doc__.splitlines()[0], EXAMPLE)
     ap.add_argument("--mount", type=float, nargs=3, metavar=("X", "Y", "Z"),
                     help="mount point on the wall, mesh frame and units (with --out-axis)")
     ap.add_argument("--out-axis", type=float, nargs=3, metavar=("X", "Y", "Z"),
                     help="direction out of the wall, mesh frame (with --mount)")
     ap.add_argument("--arm", type=int, help="which arm to hang on (default: the lowest)")
-    ap.add_argument("--params", default="params.yaml", help="params file (default: params.yaml)")
-    ap.add_argument("--data-root", default="data", help="data folder (default: data)")
     ap.set_defaults(run=run)
 
 
@@ -187,20 +179,7 @@ def import_support(args, params, bar) -> dict:
 
 
 def run(args) -> int:
-    existing_file(args.mesh, "mesh")
-    args.name = args.name or Path(args.mesh).stem
-    if not args.name.replace("_", "").replace("-", "").isalnum():
-        raise InputError(f"--name: {args.name!r} must be letters, digits, '_' or '-'")
-    dest = user_dir(args.data_root, "support", args.name)
-    if dest.exists():
-        raise InputError(f"{dest}: a support named {args.name!r} is already imported "
-                         "(choose another --name or delete the folder)")
-    params = load_params(args.params)
-    with progress(5, "import-support") as bar:
-        record = import_support(args, params, bar)
-    if record["part_iou"] < IOU_WARN:
-        sys.stderr.write(f"WARNING: {args.mesh}: convex parts cover the mesh with IoU "
-                         f"{record['part_iou']:.3f} < {IOU_WARN}: collisions will be coarse\n")
+    dest, record = run_import(args, "support", import_support)
     print(f"{dest}: imported {args.name} ({record['difficulty']}, blocking height "
           f"{1000 * record['blocking_height_m']:.1f} mm, {record['n_parts']} convex parts, IoU "
           f"{record['part_iou']:.3f}, {len(record['skts'])}/{record['n_skts_attempted']} SKTs "
