@@ -230,3 +230,23 @@ def test_sim_eval_evaluates_extra_items_apart_from_table_one(capsys, tmp_path, d
                        str(tmp_path / "x"), "--reports-dir", str(tmp_path / "xr"), "--log-dir",
                        str(tmp_path / "logs")])
     assert not (tmp_path / "x" / "trials.parquet").exists()
+
+
+@pytest.mark.slow
+def test_a_closed_ring_is_refused_with_the_reason(capsys, tmp_path, data_root, planner_params):
+    """A ring closed all round: the reference drop finds a hang (it starts threaded), but no
+    path from the start region reaches it (two closed loops cannot be linked): exit 2 with
+    the planner's failures, nothing written."""
+    ring = trimesh.creation.torus(0.022, 0.0045, major_sections=64, minor_sections=24)
+    ring.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
+    ring.apply_translation((0.062, 0.0, 0.0))
+    stem = trimesh.creation.cylinder(0.005, segment=[(0.005, 0, 0.0), (0.042, 0, 0.0)])
+    plate = trimesh.creation.box(extents=(0.01, 0.04, 0.06))
+    plate.apply_translation((0.005, 0, 0))
+    mesh = tmp_path / "closed_ring.stl"
+    trimesh.boolean.union([plate, stem, ring], engine="manifold").export(mesh)
+    before = tree_state(data_root)
+    rc, _, err = run_skt(capsys, "import-support", mesh, "--params", planner_params,
+                         "--data-root", data_root)
+    assert rc == 2 and "no SKT reaches the hang" in err, err
+    assert tree_state(data_root) == before
