@@ -16,10 +16,12 @@ import sys
 from pathlib import Path
 
 from skt_lib.config import METHODS
+from tools import scaling
 
 ROOT = Path(__file__).resolve().parents[1]
 METRICS = Path("reports/sim_eval/metrics.json")
 BENCH = Path("reports/bench/bench.json")
+SCALING = Path("reports/bench/scaling.json")  # optional: written by `python -m tools.scaling`
 
 LEVELS = (("all", "All"), ("easy", "Easy"), ("normal", "Normal"), ("hard", "Hard"),
           ("very_hard", "Very Hard"))
@@ -62,7 +64,8 @@ class DocsError(Exception):
 
 
 def load_reports(root: Path = ROOT) -> dict:
-    """``{"metrics": sim_eval's metrics.json, "bench": bench.json}`` under ``root``."""
+    """``{"metrics": sim_eval's metrics.json, "bench": bench.json, "scaling": scaling.json
+    or {}}`` under ``root``."""
     out = {}
     for key, rel in (("metrics", METRICS), ("bench", BENCH)):
         path = root / rel
@@ -72,6 +75,8 @@ def load_reports(root: Path = ROOT) -> dict:
             out[key] = json.loads(path.read_text())
         except json.JSONDecodeError as err:
             raise DocsError(f"{rel}: not valid JSON: {err}") from None
+    path = root / SCALING
+    out["scaling"] = json.loads(path.read_text()) if path.is_file() else {}
     return out
 
 
@@ -153,9 +158,11 @@ def blocks(reports: dict) -> dict[str, dict[str, str]]:
     """File (relative to the repo root) -> block name -> the block's generated text."""
     metrics, bench = reports["metrics"], reports["bench"]
     return {
-        "README.md": {"results": table_one(metrics)},
+        "README.md": {"results": table_one(metrics),
+                      "presets": scaling.presets_summary(reports.get("scaling", {}))},
         "docs/presets.md": {"sim-size": sim_size(metrics), "bench": bench_table(bench),
-                            "paper-preset": paper_preset(bench)},
+                            "paper-preset": paper_preset(bench),
+                            "scaling": scaling.table(reports.get("scaling", {}))},
     }
 
 

@@ -1,0 +1,72 @@
+"""tools.scaling: the process-tree monitor, the power-law fit and the figure."""
+
+import json
+import sys
+
+import pytest
+
+from tools import scaling
+
+# a stage that holds 300 MB itself while a worker holds 200 MB more
+STAGE = ("import subprocess, sys, time\n"
+         "b = bytearray(300 * 2**20); b[::4096] = b'x' * len(b[::4096])\n"
+         "w = subprocess.Popen([sys.executable, '-c', 'b = bytearray(200 * 2**20); "
+         "b[::4096] = bytes(len(b[::4096])); import time; time.sleep(2)'])\n"
+         "time.sleep(2.5); w.wait()\n")
+
+
+def test_stage_of_reads_python_dash_m():
+    assert scaling.stage_of(["/v/bin/python", "-m", "stages.rrt_skts"]) == "rrt_skts"
+    assert scaling.stage_of(["python", "-c", "x", "-m", "stages.train"]) == "train"
+    assert scaling.stage_of(["python", "-m", "tools.scaling"]) is None
+    assert scaling.stage_of(["dvc", "repro", "stages.train"]) is None
+
+
+def test_monitor_sums_a_stage_and_its_workers(tmp_path):
+    rc, wall, stages = scaling.run_monitored(
+        [sys.executable, "-c", STAGE, "-m", "stages.toy"], tmp_path)
+    assert rc == 0 and set(stages) == {"toy"}
+    toy = stages["toy"]
+    assert 500 <= toy["peak_rss_mb"] < 700  # both processes counted, once each
+    assert 2.0 <= toy["wall_s"] <= wall + scaling.POLL_S
+    assert toy["cpu_s"] > 0
+
+
+def test_fit_recovers_a_power_law():
+    a, b = scaling.fit([60, 120, 240], [3.0 * n**1.5 for n in (60, 120, 240)])
+    assert a == pytest.approx(3.0) and b == pytest.approx(1.5)
+
+
+def test_plot_only_redraws_from_the_json(tmp_path):
+    runs = [{"n_supports": n, "commit": "x", "wall_s": 10.0 * n,
+             "stages": {"mesh_gen": {"wall_s": n / 10, "cpu_s": n / 5, "peak_rss_mb": 100.0 + n},
+                        "train": {"wall_s": n, "cpu_s": 2 * n, "peak_rss_mb": 900.0}}}
+            for n in (60, 120, 240)]
+    (tmp_path / "scaling.json").write_text(json.dumps({"runs": runs}))
+    assert scaling.main(["--plot-only", "--out", str(tmp_path)]) == 0
+    data = json.loads((tmp_path / "scaling.json").read_text())
+    assert data["peak_rss_mb"]["mesh_gen"] == 340.0 and data["peak_rss_mb"]["train"] == 900.0
+    assert (tmp_path / "scaling.png").stat().st_size > 10_000
+
+
+def test_extrapolation_and_tables():
+    def stages(n):
+        return {"mesh_gen": {"wall_s": 0.5 * n, "cpu_s": n, "peak_rss_mb": 100.0},
+                "rrt_skts": {"wall_s": 2.0 * n**1.2, "cpu_s": 4 * n, "peak_rss_mb": 800.0},
+                "sim_eval": {"wall_s": 600.0 + n / 60, "cpu_s": 1200.0, "peak_rss_mb": 900.0}}
+    data = {"stages": ["mesh_gen", "rrt_skts", "sim_eval"], "skts_per_support": 4,
+            "n_test_supports": 20, "machine": "2 cores", "peak_rss_mb": {
+                "mesh_gen": 100.0, "rrt_skts": 800.0, "sim_eval": 900.0},
+            "runs": [{"n_supports": n, "commit": "abc", "wall_s": 2000.0, "stages": stages(n)}
+                     for n in (60, 120, 240)]}
+    paper = scaling.extrapolate(data)
+    assert paper["mesh_gen"] == pytest.approx(0.5 * 472)
+    assert paper["rrt_skts"] == pytest.approx(2.0 * 472**1.2 * 50 / 4)
+    assert paper["sim_eval"] == pytest.approx((600.0 + 420 / 180) * 3)  # fixed test set
+    table = scaling.table(data)
+    assert "| `rrt_skts` | " in table and "| 1.20 | 800 |" in table
+    assert "extrapolat" in table
+    summary = scaling.presets_summary(data)
+    assert "| embedded default | 120 | 480 |" in summary
+    assert f"≈ {sum(paper.values()) / 3600:.1f} h (**extrapolated**; `rrt_skts`" in summary
+    assert scaling.table({"runs": []}).startswith("Not measured")

@@ -1,0 +1,272 @@
+"""Cost as the work grows: the whole pipeline at several support counts; each stage's wall
+time, CPU time and peak memory into ``reports/bench/scaling.json`` and ``scaling.png``.
+
+    .venv/bin/python -m tools.scaling --supports 240 60 120 --work /tmp/skt-scaling
+    .venv/bin/python -m tools.scaling --plot-only      # redraw scaling.png from the JSON
+
+Each count runs in its own clone of the committed HEAD (this checkout's ``.venv`` linked
+in) with ``mesh_gen.n_supports`` set and every other parameter as committed: the same
+objects, the same test and validation set sizes. ``dvc repro`` runs under a monitor that
+polls the process tree every ``POLL_S``: a stage is its ``python -m stages.<name>``
+process with all its descendants (the workers). Its wall time runs from its first to its
+last sighting; ``peak_rss_mb`` is the largest sum of their resident set sizes seen; its CPU
+time sums each process's user + system time at its last sighting (a poll's worth may be
+missed at the end of each process). Each count is written to the JSON as soon as it
+finishes; counts already there are skipped (``--redo`` runs them again).
+"""
+
+import argparse
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+import yaml
+
+from skt_lib.config import LEVELS
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "reports" / "bench"
+POLL_S = 0.5
+STAGE_CMD = re.compile(r"^stages\.([a-z_]+)$")
+
+
+def stage_of(cmdline: list[str]) -> str | None:
+    """The stage a process runs: ``python -m stages.<name>`` (None for any other process)."""
+    for flag, arg in zip(cmdline, cmdline[1:]):
+        if flag == "-m" and (m := STAGE_CMD.match(arg)):
+            return m.group(1)
+    return None
+
+
+class TreeMonitor:
+    """Per-stage wall time, CPU time and peak summed RSS of a process tree, by polling."""
+
+    def __init__(self):
+        self.stages: dict[str, dict] = {}
+        self._cpu: dict[str, dict[int, float]] = {}
+
+    def poll(self, root: psutil.Process, now: float) -> None:
+        try:
+            procs = [root, *root.children(recursive=True)]
+        except psutil.NoSuchProcess:
+            return
+        for p in procs:
+            try:
+                name = stage_of(p.cmdline())
+                if name is None:
+                    continue
+                tree = [p, *p.children(recursive=True)]
+                rss, cpu = 0, self._cpu.setdefault(name, {})
+                for q in tree:
+                    with_times = q.cpu_times()
+                    rss += q.memory_info().rss
+                    cpu[q.pid] = with_times.user + with_times.system
+            except (psutil.NoSuchProcess, psutil.AccessDenied, psutil.ZombieProcess):
+                continue
+            s = self.stages.setdefault(name, {"first": now, "last": now, "peak_rss": 0})
+            s["last"], s["peak_rss"] = now, max(s["peak_rss"], rss)
+
+    def result(self) -> dict[str, dict]:
+        return {name: {"wall_s": s["last"] - s["first"] + POLL_S,
+                       "cpu_s": float(sum(self._cpu[name].values())),
+                       "peak_rss_mb": s["peak_rss"] / 2**20}
+                for name, s in self.stages.items()}
+
+
+def run_monitored(cmd: list[str], cwd: Path, env: dict | None = None,
+                  log: Path | None = None) -> tuple[int, float, dict]:
+    """Run ``cmd``; return (exit code, wall seconds, :meth:`TreeMonitor.result`)."""
+    mon, t0 = TreeMonitor(), time.monotonic()
+    with open(log or "/dev/null", "w") as out:
+        proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT)
+        root = psutil.Process(proc.pid)
+        while proc.poll() is None:
+            mon.poll(root, time.monotonic() - t0)
+            time.sleep(POLL_S)
+    return proc.returncode, time.monotonic() - t0, mon.result()
+
+
+def prepare(work: Path, n: int) -> Path:
+    """A clone of HEAD under ``work`` with ``mesh_gen.n_supports = n`` (fresh each time)."""
+    d = work / f"supports_{n}"
+    shutil.rmtree(d, ignore_errors=True)
+    subprocess.run(["git", "clone", "-q", str(ROOT), str(d)], check=True)
+    (d / ".venv").symlink_to(ROOT / ".venv")
+    params = yaml.safe_load((d / "params.yaml").read_text())
+    params["mesh_gen"]["n_supports"] = n
+    (d / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+    return d
+
+
+def fit(ns, values) -> tuple[float, float]:
+    """Least-squares power law ``value = a · n^b`` through the points; returns (a, b)."""
+    b, log_a = np.polyfit(np.log(ns), np.log(values), 1)
+    return float(math.exp(log_a)), float(b)
+
+
+#: The paper preset of docs/presets.md: supports, SKTs per support, test supports.
+PAPER = {"n_supports": 472, "skts_per_support": 50, "n_test_supports": 60}
+
+
+def extrapolate(data: dict) -> dict[str, float]:
+    """Each stage's expected wall seconds at :data:`PAPER` — an extrapolation from the
+    measured points, not a measurement: a power law in the number of supports fitted through
+    them (:func:`fit`); ``rrt_skts`` times the paper's SKTs per support over the runs';
+    ``sim_eval``, which runs a fixed test set, its mean time times the paper's test supports
+    over the runs' (the same objects and methods)."""
+    runs = sorted(data["runs"], key=lambda r: r["n_supports"])
+    ns = [r["n_supports"] for r in runs]
+    out = {}
+    for s in data["stages"]:
+        walls = [r["stages"][s]["wall_s"] for r in runs if s in r["stages"]]
+        if len(walls) != len(runs) or len(runs) < 2:
+            continue
+        if s == "sim_eval":
+            out[s] = float(np.mean(walls)) * PAPER["n_test_supports"] / data["n_test_supports"]
+            continue
+        a, b = fit(ns, walls)
+        out[s] = a * PAPER["n_supports"] ** b
+        if s == "rrt_skts":
+            out[s] *= PAPER["skts_per_support"] / data["skts_per_support"]
+    return out
+
+
+def table(data: dict) -> str:
+    """Markdown: each stage's measured wall time per count, its fitted exponent, its peak RSS
+    and its paper-preset extrapolation."""
+    runs = sorted(data.get("runs", []), key=lambda r: r["n_supports"])
+    if not runs:
+        return "Not measured yet: run `.venv/bin/python -m tools.scaling`."
+    ns = [r["n_supports"] for r in runs]
+    paper = extrapolate(data)
+    lines = [f"Measured by `python -m tools.scaling` ({data['machine']}; commits "
+             f"{', '.join(sorted({r['commit'] for r in runs}))}): `dvc repro` of the whole "
+             "pipeline with only `mesh_gen.n_supports` changed. Wall time in minutes; peak RSS "
+             "of the stage and its workers together, the largest over the counts; the last "
+             f"column extrapolates to the paper preset ({PAPER['n_supports']} supports, "
+             f"{PAPER['skts_per_support']} SKTs each, {PAPER['n_test_supports']} test supports; "
+             "`tools/scaling.py: extrapolate`) — an extrapolation, not a measurement.", "",
+             "| stage | " + " | ".join(f"{n} supports" for n in ns)
+             + " | exponent | peak RSS (MB) | paper preset (extrapolated) |",
+             "|---" * (len(ns) + 4) + "|"]
+    for s in data["stages"]:
+        if not all(s in r["stages"] for r in runs):
+            continue
+        walls = [r["stages"][s]["wall_s"] for r in runs]
+        b = f"{fit(ns, walls)[1]:.2f}" if len(runs) > 1 else "–"
+        extra = f"{paper[s] / 60:.0f} min" if s in paper else "–"
+        lines.append(f"| `{s}` | " + " | ".join(f"{w / 60:.1f}" for w in walls)
+                     + f" | {b} | {data['peak_rss_mb'][s]:.0f} | {extra} |")
+    total = " | ".join(f"**{r['wall_s'] / 60:.1f}**" for r in runs)
+    paper_h = f"**≈ {sum(paper.values()) / 3600:.1f} h**" if paper else "–"
+    lines.append(f"| whole `dvc repro` | {total} | | | {paper_h} |")
+    return "\n".join(lines)
+
+
+def presets_summary(data: dict) -> str:
+    """Markdown for the README: the whole pipeline's measured time per count, and the paper
+    preset's, labelled an extrapolation."""
+    runs = sorted(data.get("runs", []), key=lambda r: r["n_supports"])
+    if not runs:
+        return "Not measured yet: run `.venv/bin/python -m tools.scaling`."
+    paper = extrapolate(data)
+    k = data["skts_per_support"]
+    default = yaml.safe_load((ROOT / "params.yaml").read_text())["mesh_gen"]["n_supports"]
+    lines = ["| preset | supports | SKTs planned | whole pipeline, 2-core CPU machine |",
+             "|---|---|---|---|"]
+    lines += [f"| {'embedded default' if r['n_supports'] == default else 'default, resized'}"
+              f" | {r['n_supports']} | {k * r['n_supports']:,} | {r['wall_s'] / 60:.0f} min "
+              "(measured) |" for r in runs]
+    if paper:
+        slowest = max(paper, key=paper.get)
+        lines.append(f"| paper | {PAPER['n_supports']} | "
+                     f"{PAPER['n_supports'] * PAPER['skts_per_support']:,} | ≈ "
+                     f"{sum(paper.values()) / 3600:.1f} h (**extrapolated**; `{slowest}` "
+                     f"{paper[slowest] / 3600:.1f} h of it) |")
+    return "\n".join(lines)
+
+
+def plot(data: dict, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = sorted(data["runs"], key=lambda r: r["n_supports"])
+    stages = [s for s in data["stages"] if all(s in r["stages"] for r in runs)]
+    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(11, 4.5))
+    ns = [r["n_supports"] for r in runs]
+    for s in stages:
+        ax_t.plot(ns, [r["stages"][s]["wall_s"] for r in runs], "o-", label=s)
+        ax_m.plot(ns, [r["stages"][s]["peak_rss_mb"] for r in runs], "o-", label=s)
+    ax_t.plot(ns, [r["wall_s"] for r in runs], "k--", label="whole dvc repro")
+    for ax, what in ((ax_t, "wall time (s)"), (ax_m, "peak RSS, stage + workers (MB)")):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xticks(ns, [str(n) for n in ns])
+        ax.set_xlabel("supports")
+        ax.set_ylabel(what)
+        ax.grid(True, which="both", alpha=0.3)
+    ax_t.legend(fontsize=7, ncol=2)
+    fig.suptitle(f"Cost as the work grows ({data['machine']})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--supports", type=int, nargs="+", default=[240, 60, 120])
+    ap.add_argument("--work", type=Path, default=Path("/tmp/skt-scaling"))
+    ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--redo", action="store_true", help="run counts already in the JSON again")
+    ap.add_argument("--plot-only", action="store_true")
+    args = ap.parse_args(argv)
+    path = args.out / "scaling.json"
+    stages = list(yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"])
+    params = yaml.safe_load((ROOT / "params.yaml").read_text())
+    data = json.loads(path.read_text()) if path.exists() else {"runs": []}
+    data.update(stages=stages, skts_per_support=params["rrt_skts"]["n_skts_per_support"],
+                n_test_supports=len(LEVELS) * params["mesh_gen"]["n_test_per_level"],
+                machine=f"{psutil.cpu_count()} cores, {params['compute']['n_workers']} workers, "
+                f"{psutil.virtual_memory().total / 2**30:.0f} GiB")
+    if not args.plot_only:
+        args.work.mkdir(parents=True, exist_ok=True)
+        for n in args.supports:
+            if not args.redo and any(r["n_supports"] == n for r in data["runs"]):
+                print(f"{n} supports: already measured (--redo to run again)")
+                continue
+            d = prepare(args.work, n)
+            commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=d, text=True,
+                                    capture_output=True, check=True).stdout.strip()
+            env = {**os.environ, "PATH": f"{d / '.venv' / 'bin'}:{os.environ['PATH']}"}
+            print(f"{n} supports: dvc repro in {d} (log {d / 'repro.log'})", flush=True)
+            rc, wall, per_stage = run_monitored([str(d / ".venv/bin/dvc"), "repro"], d, env,
+                                                d / "repro.log")
+            if rc != 0:
+                print(f"{n} supports: dvc repro exited {rc}; see {d / 'repro.log'}")
+                return rc
+            data["runs"] = [r for r in data["runs"] if r["n_supports"] != n] + [{
+                "n_supports": n, "commit": commit, "wall_s": wall, "stages": per_stage}]
+            data["runs"].sort(key=lambda r: r["n_supports"])
+            path.write_text(json.dumps(data, indent=2) + "\n")
+            print(f"{n} supports: {wall / 60:.1f} min; "
+                  + ", ".join(f"{s} {v['wall_s']:.0f} s" for s, v in per_stage.items()), flush=True)
+    if data["runs"]:
+        data["peak_rss_mb"] = {s: max(r["stages"][s]["peak_rss_mb"] for r in data["runs"]
+                                      if s in r["stages"])
+                               for s in stages if any(s in r["stages"] for r in data["runs"])}
+        path.write_text(json.dumps(data, indent=2) + "\n")
+        plot(data, args.out / "scaling.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
