@@ -236,7 +236,8 @@ def test_table_one_formats():
 
 
 def test_check_fails_on_an_edited_figure_and_the_tool_repairs_it(tmp_path, capsys):
-    for rel in ("README.md", "docs/presets.md", docs_results.METRICS, docs_results.BENCH):
+    for rel in ("README.md", "docs/presets.md", docs_results.METRICS, docs_results.BENCH,
+                docs_results.SCALING):
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / rel, tmp_path / rel)
     readme = tmp_path / "README.md"
