@@ -28,7 +28,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from skt_lib.config import MeshGenParams
-from skt_lib.errors import MeshError
+from skt_lib.errors import GenerationFailed, MeshError
 from skt_lib.geometry.convex import Mesh
 from skt_lib.geometry.supports import (
     HANG_MIN_X_M,
@@ -227,7 +227,7 @@ def mesh_difficulty(mesh: Mesh, p: MeshGenParams, arm_index: int | None = None
     for arm, shape in zip(arms, shapes):
         try:
             measured.append((arm, shape, measure_difficulty(shape, p)))
-        except Exception as err:  # noqa: BLE001 — GenerationFailed: this arm cannot hang
+        except GenerationFailed as err:  # this arm cannot hang (no hang region, slides off)
             measured.append((arm, shape, err))
     if arm_index is not None:
         if not 0 <= arm_index < len(arms):
