@@ -45,7 +45,7 @@ import numpy as np
 
 from skt_lib.errors import ItemFailure
 from skt_lib.geometry.se3 import skt_rotation
-from skt_lib.geometry.skt import executed_path, minimal_rotation, resample, skt_frames
+from skt_lib.geometry.skt import cross3, executed_path, minimal_rotation, resample, skt_frames
 
 
 LIFT_STEP_M = 0.002
@@ -85,13 +85,13 @@ def limit_direction(d: np.ndarray, prev: np.ndarray, max_turn: float) -> np.ndar
     """Unit direction closest to ``d`` within ``max_turn`` rad of ``prev`` (unit)."""
     d = _unit(np.asarray(d, float))
     if _angle(d, prev) > max_turn:
-        axis = np.cross(prev, d)
+        axis = cross3(prev, d)
         if np.linalg.norm(axis) < 1e-9:  # opposite: turn about a horizontal axis
-            axis = np.cross(prev, [0.0, 0.0, 1.0])
+            axis = cross3(prev, (0.0, 0.0, 1.0))
             if np.linalg.norm(axis) < 1e-9:
                 axis = np.array([0.0, 1.0, 0.0])
         axis = _unit(axis)
-        d = prev * np.cos(max_turn) + np.cross(axis, prev) * np.sin(max_turn)
+        d = prev * np.cos(max_turn) + cross3(axis, prev) * np.sin(max_turn)
     return _unit(d)
 
 
@@ -162,10 +162,11 @@ class _Checker:
         n = max(1, int(np.ceil((np.linalg.norm(pb - pa) + angle * self.s.probe_radius_m)
                                / self.s.check_step_m)))
         u = np.arange(1, n + 1) / n
-        quats = np.tile(qb, (n, 1)) if angle < 1e-9 else _slerp(qa, qb, u)
+        quats = None if angle < 1e-9 else _slerp(qa, qb, u)  # None: qb throughout
+        move = pb - pa
         for k in range(n):
             self.n += 1
-            if self.collides(pa + u[k] * (pb - pa), quats[k]):
+            if self.collides(pa + u[k] * move, qb if quats is None else quats[k]):
                 return False
         return True
 
