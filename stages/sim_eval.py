@@ -78,8 +78,9 @@ def main(argv=None) -> int:
              len(objects), p.n_proposals)
     work = item_store(args)
 
-    def run(tasks, label: str) -> list[dict]:
-        results, _, crashes = run_items(run_trial, tasks, params.compute, label, work=work)
+    def run(tasks, label: str, resumable: bool = True) -> list[dict]:
+        results, _, crashes = run_items(run_trial, tasks, params.compute, label,
+                                        work=work if resumable else None)
         if crashes:
             raise RuntimeError(f"{len(crashes)} trials crashed, first: {crashes[0][0].trial_id}: "
                                f"{crashes[0][1]}")
@@ -110,7 +111,8 @@ def main(argv=None) -> int:
 
     chosen = pick_rollouts(trials, p.n_record, p.methods)
     write_report(rep, trials, pairs, metrics, p.methods, supports, objects, missing, chosen)
-    replayed = replay(chosen, tasks, rows, supports, objects, settings, p.record_every)
+    replayed = replay(chosen, tasks, rows, supports, objects, settings, p.record_every,
+                      lambda ts, label: run(ts, label, resumable=False))  # traces: not kept
     s_mesh = {s.support_id: s.mesh for s in supports}
     o_mesh = {o.object_id: o.mesh for o in objects}
     log_rollouts(out / "sim_eval.rrd", replayed,

@@ -57,20 +57,22 @@ def pick_rollouts(trials: pd.DataFrame, n: int, methods) -> list[str]:
 
 
 def replay(chosen: list[str], tasks: list[TrialTask], rows: list[dict], supports: list[TestSupport],
-           objects: list[TestObject], settings: TrialSettings, record_every: int) -> list[tuple]:
+           objects: list[TestObject], settings: TrialSettings, record_every: int,
+           run: Callable[[list[TrialTask], str], list[dict]] | None = None) -> list[tuple]:
     """Run the ``chosen`` trials again with a trace every ``record_every`` steps: ``[(task,
-    {"row", "trace"})]``. Raises if a replay's row differs from the evaluated one (recording
-    must not change what happened)."""
+    {"row", "trace"})]``; ``run(tasks, label)`` as in :func:`run_rounds` (e.g. on a pool;
+    default: here, in order). Raises if a replay's row differs from the evaluated one
+    (recording must not change what happened)."""
     by_id = {t.trial_id: t for t in tasks}
     rows_by_id = {r["trial_id"]: r for r in rows}
     s_by_id, o_by_id = {s.support_id: s for s in supports}, {o.object_id: o for o in objects}
+    traced = [make_task(t.method, s_by_id[t.support_id], o_by_id[t.object_id],
+                        np.asarray(t.positions), settings, record_every, t.extra["proposal"])
+              for t in (by_id[tid] for tid in chosen)]
+    results = (run or (lambda ts, _: [run_trial(t) for t in ts]))(traced, "recording")
     out = []
-    for tid in chosen:
-        t = by_id[tid]
-        traced = run_trial(make_task(t.method, s_by_id[t.support_id], o_by_id[t.object_id],
-                                     np.asarray(t.positions), settings, record_every,
-                                     t.extra["proposal"]))
-        if traced["row"] != rows_by_id[tid]:
+    for tid, result in zip(chosen, results):
+        if result["row"] != rows_by_id[tid]:
             raise RuntimeError(f"{tid}: the recorded replay differs from the evaluated trial")
-        out.append((t, traced))
+        out.append((by_id[tid], result))
     return out
