@@ -22,6 +22,7 @@ from tqdm import tqdm
 from skt_lib.config import load_params
 from skt_lib.learning.data import load_training_set
 from skt_lib.learning.predictor import SktPredictor
+from skt_lib.learning.pointnet2 import geometry_memo
 from skt_lib.learning.train import from_params, train_sctdn
 from skt_lib.learning.train_baselines import train_vatmart, vatmart_config
 from skt_lib.learning.vatmart import VatMartPredictor
@@ -42,28 +43,29 @@ def main(argv=None) -> int:
     cfg, settings = from_params(p, data.k, data.T, data.n_points)
     n_prop = params.sim_eval.n_proposals
     metrics, histories, walls = {}, {}, {}
-    for name in tqdm(pb.models, desc="baselines", unit="model"):
-        seed = params.common.seed  # SCTDN's: the same view order, the same initial backbone
-        history: list[dict] = []
+    with geometry_memo():  # the same views for every model: each cloud searched once
+        for name in tqdm(pb.models, desc="baselines", unit="model"):
+            seed = params.common.seed  # SCTDN's: the same view order, the same initial backbone
+            history: list[dict] = []
 
-        def on_epoch(epoch, m, name=name, history=history):
-            history.append(m)
-            log.info("%s epoch %d: %s", name, epoch,
-                     {k2: v if v is None else round(v, 4) for k2, v in m.items()})
+            def on_epoch(epoch, m, name=name, history=history):
+                history.append(m)
+                log.info("%s epoch %d: %s", name, epoch,
+                         {k2: v if v is None else round(v, 4) for k2, v in m.items()})
 
-        t0 = time.perf_counter()
-        if name == "sctdn_cp_feature":
-            model, best = train_sctdn(_replace(cfg, condition="contact_point"), data.templates,
-                                      train, val, settings, seed, on_epoch)
-            SktPredictor(model).save(out / name)
-        else:
-            vcfg = vatmart_config(name, cfg, pb)
-            model, best = train_vatmart(vcfg, train, val, settings, seed, n_prop, on_epoch)
-            VatMartPredictor(model).save(out / name)
-        walls[name] = time.perf_counter() - t0
-        curve = [h["val_traj_l2_mm"] for h in history]
-        metrics[name] = {**best, "best_epoch": int(np.argmin(curve)), "epochs": p.epochs}
-        histories[name] = history
+            t0 = time.perf_counter()
+            if name == "sctdn_cp_feature":
+                model, best = train_sctdn(_replace(cfg, condition="contact_point"), data.templates,
+                                          train, val, settings, seed, on_epoch)
+                SktPredictor(model).save(out / name)
+            else:
+                vcfg = vatmart_config(name, cfg, pb)
+                model, best = train_vatmart(vcfg, train, val, settings, seed, n_prop, on_epoch)
+                VatMartPredictor(model).save(out / name)
+            walls[name] = time.perf_counter() - t0
+            curve = [h["val_traj_l2_mm"] for h in history]
+            metrics[name] = {**best, "best_epoch": int(np.argmin(curve)), "epochs": p.epochs}
+            histories[name] = history
     write_metrics(rep, metrics)
     _write_report(rep, metrics, histories, len(train), len(val), p, n_prop)
     write_run_log(Path(args.log_dir), "train_baselines", {"wall_s": walls})

@@ -392,3 +392,87 @@ def test_the_size_threshold_routes_large_cpu_inputs_to_the_kdtree(monkeypatch):
     calls.clear()
     pointnet2.ball_query(0.1, 8, xyz.requires_grad_(), xyz[:, :20].detach())  # gradients: dense
     assert calls == []
+
+
+def _memo_supports(n=4, views=3, T=8, n_points=512):
+    from skt_lib.learning.data import SupportData
+
+    rng = np.random.default_rng(0)
+    out = []
+    for i in range(n):
+        pts = rng.normal(size=(views, n_points, 3)).astype(np.float32) * 0.05
+        contact = pts[0, 0].astype(np.float64)
+        skt = contact + np.outer(np.linspace(0, 1, T), [0.1, 0.02 * i, 0.05])
+        aff = np.exp(-np.linalg.norm(pts - contact, axis=-1) ** 2 / 2e-4).astype(np.float32)
+        out.append(SupportData(f"s{i}", "train", i % 2, pts, aff, skt[None], contact, aff,
+                               np.ones(views, bool)))
+    return out
+
+
+def test_geometry_memo_gives_the_same_weights_and_skips_repeated_searches(monkeypatch):
+    """Training with the per-cloud memo is training without it, bit for bit (every weight
+    and every validation figure), and a cloud seen before is not searched again."""
+    from dataclasses import replace
+
+    from skt_lib.learning import pointnet2
+    from skt_lib.learning.sctdn import SctdnConfig
+    from skt_lib.learning.train import TrainSettings, make_batch, train_sctdn
+
+    sup = _memo_supports()
+    cfg = SctdnConfig(k=2, T=8, n_points=512)
+    st = TrainSettings(epochs=3, views_per_epoch=2, batch_size=3, lr=1e-3, lr_final_ratio=0.1,
+                       weight_decay=0.0, val_views=(0, 2), contact_weight=0.1, threads=1)
+    templates = np.zeros((2, 8, 3))
+
+    def train():
+        model, best = train_sctdn(cfg, templates, sup[:3], sup[3:], st, seed=5)
+        return model.state_dict(), best
+
+    plain_w, plain_best = train()
+    assert pointnet2._memo is None
+    with pointnet2.geometry_memo():
+        memo_w, memo_best = train()
+        kept = len(pointnet2._memo)
+        # at these sizes the first level's ball query and the finest 3-NN take the KD-tree
+        assert {"fps", "ball_query", "three_nn"} <= _ops_seen(monkeypatch, sup)
+    assert pointnet2._memo is None and kept > 0
+    assert plain_best == memo_best
+    assert plain_w.keys() == memo_w.keys()
+    for k in plain_w:
+        assert torch.equal(plain_w[k], memo_w[k]), k
+
+    # inside the memo: the second pass over the same clouds runs no search at all
+    calls = []
+    real_tree, real_fps = pointnet2.cKDTree, pointnet2._fps_cloud
+    monkeypatch.setattr(pointnet2, "cKDTree",
+                        lambda *a, **k: calls.append("tree") or real_tree(*a, **k))
+    monkeypatch.setattr(pointnet2, "_fps_cloud", lambda *a: calls.append("fps") or real_fps(*a))
+    model, _ = train_sctdn(cfg, templates, sup[:3], sup[3:], replace(st, epochs=1), seed=5)
+    model.eval()
+    b = make_batch([(s, v) for s in sup for v in range(3)])
+    with pointnet2.geometry_memo(), torch.no_grad():
+        first = model(b["xyz"], b["scale"], b["family"], b["contact"])
+        n_first = len(calls)
+        again = model(b["xyz"], b["scale"], b["family"], b["contact"])
+    assert n_first > 0 and len(calls) == n_first
+    for k in first:
+        assert torch.equal(first[k], again[k]), k
+
+
+def _ops_seen(monkeypatch, sup):
+    """The ops that stored something in the memo on one batch of ``sup``."""
+    from skt_lib.learning import pointnet2
+
+    seen = []
+    real = pointnet2._per_cloud
+    monkeypatch.setattr(pointnet2, "_per_cloud",
+                        lambda op, *a: seen.append(op) or real(op, *a))
+    from skt_lib.learning.sctdn import Sctdn, SctdnConfig
+    from skt_lib.learning.train import make_batch
+
+    b = make_batch([(s, 0) for s in sup])
+    with torch.no_grad():
+        Sctdn(SctdnConfig(k=2, T=8, n_points=512), torch.zeros(2, 8, 3)).eval()(
+            b["xyz"], b["scale"], b["family"], b["contact"])
+    monkeypatch.setattr(pointnet2, "_per_cloud", real)
+    return set(seen)
