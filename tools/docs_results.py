@@ -162,6 +162,7 @@ def blocks(reports: dict) -> dict[str, dict[str, str]]:
                       "presets": scaling.presets_summary(reports.get("scaling", {}))},
         "docs/presets.md": {"sim-size": sim_size(metrics), "bench": bench_table(bench),
                             "paper-preset": paper_preset(bench),
+                            "fresh-repro": scaling.fresh_summary(reports.get("scaling", {})),
                             "scaling": scaling.table(reports.get("scaling", {}))},
     }
 

@@ -2,6 +2,7 @@
 time, CPU time and peak memory into ``reports/bench/scaling.json`` and ``scaling.png``.
 
     .venv/bin/python -m tools.scaling --supports 240 60 120 --work /tmp/skt-scaling
+    .venv/bin/python -m tools.scaling --fresh          # git clone + make repro, set-up included
     .venv/bin/python -m tools.scaling --plot-only      # redraw scaling.png from the JSON
 
 Each count runs in its own clone of the committed HEAD (this checkout's ``.venv`` linked
@@ -13,6 +14,11 @@ last sighting; ``peak_rss_mb`` is the largest sum of their resident set sizes se
 time sums each process's user + system time at its last sighting (a poll's worth may be
 missed at the end of each process). Each count is written to the JSON as soon as it
 finishes; counts already there are skipped (``--redo`` runs them again).
+
+``--fresh`` measures what the README promises instead: a plain ``git clone`` of HEAD and
+``make repro`` in it, the environment created from nothing (no ``.venv`` linked, pip's
+downloads cached or not as on the machine), under the same monitor; the set-up is the time
+before the first stage starts. It is written to ``fresh_repro`` in the JSON.
 """
 
 import argparse
@@ -74,6 +80,11 @@ class TreeMonitor:
             s = self.stages.setdefault(name, {"first": now, "last": now, "peak_rss": 0})
             s["last"], s["peak_rss"] = now, max(s["peak_rss"], rss)
 
+    @property
+    def first_seen(self) -> float:
+        """When the first stage was first seen (seconds after the monitored command started)."""
+        return min((s["first"] for s in self.stages.values()), default=float("nan"))
+
     def result(self) -> dict[str, dict]:
         return {name: {"wall_s": s["last"] - s["first"] + POLL_S,
                        "cpu_s": float(sum(self._cpu[name].values())),
@@ -82,9 +93,10 @@ class TreeMonitor:
 
 
 def run_monitored(cmd: list[str], cwd: Path, env: dict | None = None,
-                  log: Path | None = None) -> tuple[int, float, dict]:
+                  log: Path | None = None, mon: "TreeMonitor | None" = None
+                  ) -> tuple[int, float, dict]:
     """Run ``cmd``; return (exit code, wall seconds, :meth:`TreeMonitor.result`)."""
-    mon, t0 = TreeMonitor(), time.monotonic()
+    mon, t0 = mon or TreeMonitor(), time.monotonic()
     with open(log or "/dev/null", "w") as out:
         proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT)
         root = psutil.Process(proc.pid)
@@ -137,6 +149,39 @@ def extrapolate(data: dict) -> dict[str, float]:
         if s == "rrt_skts":
             out[s] *= PAPER["skts_per_support"] / data["skts_per_support"]
     return out
+
+
+def fresh_repro(work: Path) -> dict:
+    """``git clone`` + ``make repro`` (module docs): wall time, set-up time and per stage."""
+    d = work / "fresh"
+    shutil.rmtree(d, ignore_errors=True)
+    t0 = time.monotonic()
+    subprocess.run(["git", "clone", "-q", str(ROOT), str(d)], check=True)
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=d, text=True,
+                            capture_output=True, check=True).stdout.strip()
+    print(f"fresh clone of {commit}: make repro in {d} (log {d / 'repro.log'})", flush=True)
+    mon, cloned = TreeMonitor(), time.monotonic() - t0
+    rc, wall, per_stage = run_monitored(["make", "repro"], d, None, d / "repro.log", mon)
+    if rc != 0:
+        raise SystemExit(f"make repro exited {rc}; see {d / 'repro.log'}")
+    clean = subprocess.run(["git", "status", "--porcelain"], cwd=d, text=True,
+                           capture_output=True, check=True).stdout.strip()
+    return {"commit": commit, "wall_s": time.monotonic() - t0, "setup_s": cloned + mon.first_seen,
+            "stages": per_stage, "git_status_clean": not clean}
+
+
+def fresh_summary(data: dict) -> str:
+    """Markdown: the measured fresh-clone ``make repro`` (:func:`fresh_repro`)."""
+    f = data.get("fresh_repro")
+    if not f:
+        return "Not measured yet: run `.venv/bin/python -m tools.scaling --fresh`."
+    slow = sorted(f["stages"].items(), key=lambda kv: -kv[1]["wall_s"])[:3]
+    return (f"Fresh `git clone` + `make repro` of commit {f['commit']} ({data['machine']}): "
+            f"**{f['wall_s'] / 60:.1f} min**, set-up (environment from nothing) "
+            f"{f['setup_s'] / 60:.1f} min of it; the longest stages "
+            + ", ".join(f"`{s}` {v['wall_s'] / 60:.1f} min" for s, v in slow)
+            + ("; `git status` clean after it." if f["git_status_clean"]
+               else "; `git status` **not** clean after it."))
 
 
 def table(data: dict) -> str:
@@ -228,6 +273,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--redo", action="store_true", help="run counts already in the JSON again")
     ap.add_argument("--plot-only", action="store_true")
+    ap.add_argument("--fresh", action="store_true",
+                    help="only git clone + make repro at the committed params (module docs)")
     args = ap.parse_args(argv)
     path = args.out / "scaling.json"
     stages = list(yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"])
@@ -237,6 +284,12 @@ def main(argv=None) -> int:
                 n_test_supports=len(LEVELS) * params["mesh_gen"]["n_test_per_level"],
                 machine=f"{psutil.cpu_count()} cores, {params['compute']['n_workers']} workers, "
                 f"{psutil.virtual_memory().total / 2**30:.0f} GiB")
+    if args.fresh:
+        args.work.mkdir(parents=True, exist_ok=True)
+        data["fresh_repro"] = fresh_repro(args.work)
+        path.write_text(json.dumps(data, indent=2) + "\n")
+        print(fresh_summary(data))
+        return 0
     if not args.plot_only:
         args.work.mkdir(parents=True, exist_ok=True)
         for n in args.supports:

@@ -70,3 +70,32 @@ def test_extrapolation_and_tables():
     assert "| embedded default | 120 | 480 |" in summary
     assert f"≈ {sum(paper.values()) / 3600:.1f} h (**extrapolated**; `rrt_skts`" in summary
     assert scaling.table({"runs": []}).startswith("Not measured")
+
+
+def test_fresh_clones_and_runs_make_repro_with_set_up_timed(tmp_path, monkeypatch):
+    """``--fresh``: a plain clone of the repo at ``ROOT`` and ``make repro`` in it, under the
+    monitor; the set-up is the time before the first stage, and a dirty tree is reported."""
+    import subprocess
+
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    (repo / "Makefile").write_text(
+        "repro:\n\tsleep 1.5\n"  # the "set-up"
+        f"\t{sys.executable} -c 'import time; time.sleep(1.2)' -m stages.toy\n"
+        "\ttouch untracked.txt\n")
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run(["git", "init", "-q", str(repo)], check=True)
+    subprocess.run([*git, "add", "Makefile"], cwd=repo, check=True)
+    subprocess.run([*git, "commit", "-qm", "toy"], cwd=repo, check=True)
+    monkeypatch.setattr(scaling, "ROOT", repo)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "scaling.json").write_text(json.dumps({"runs": []}))
+    f = scaling.fresh_repro(tmp_path / "work")
+    assert set(f["stages"]) == {"toy"} and 1.0 <= f["stages"]["toy"]["wall_s"] <= 2.5
+    assert 1.4 <= f["setup_s"] <= f["wall_s"] - 1.0
+    assert f["wall_s"] >= 2.7 and f["git_status_clean"] is False
+    assert len(f["commit"]) >= 7
+    text = scaling.fresh_summary({"machine": "2 cores", "fresh_repro": f})
+    assert f"commit {f['commit']}" in text and "`toy`" in text and "**not** clean" in text
+    assert scaling.fresh_summary({}).startswith("Not measured")
