@@ -93,11 +93,16 @@ class ItemStore:
             pass
 
 
+_SCALARS = frozenset({type(None), bool, int, float, str})
+
+
 def _canonical(obj):
     """A JSON-able form of a task that is equal exactly when the tasks are equal."""
     if obj is None or isinstance(obj, (bool, int, float, str)):
         return obj
     if isinstance(obj, (list, tuple)):
+        if all(type(v) in _SCALARS for v in obj):  # e.g. a pose's floats: themselves, fast
+            return list(obj)
         return [_canonical(v) for v in obj]
     if isinstance(obj, (set, frozenset)):
         return sorted((_canonical(v) for v in obj), key=repr)

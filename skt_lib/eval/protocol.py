@@ -151,12 +151,13 @@ def make_task(method: str, s: TestSupport, o: TestObject, positions: np.ndarray,
     ``/p<proposal>``)."""
     tid = f"{method}/{s.support_id}/{o.object_id}" + (f"/p{proposal}" if proposal else "")
     others = s.others if method in FALLS_BACK_TO_STORED else ()
+    # plain Python floats, not numpy scalars: the same values, a tenth of the pickle
     return TrialTask(
         tid, method, s.support_id, o.object_id, s.urdf, o.urdf,
-        tuple(o.keypoint.ravel()), o.grasps, o.radius_m,
-        tuple(map(tuple, np.asarray(positions, float))), settings, record_every,
+        tuple(np.asarray(o.keypoint, float).ravel().tolist()), o.grasps, float(o.radius_m),
+        tuple(map(tuple, np.asarray(positions, float).tolist())), settings, record_every,
         {"difficulty": s.difficulty, "category": o.category, "proposal": proposal}, hand_of(method),
-        tuple(tuple(map(tuple, np.asarray(k, float))) for k in others))
+        tuple(tuple(map(tuple, np.asarray(k, float).tolist())) for k in others))
 
 
 #: Suffix of the single-sample rows :func:`per_pair` adds for proposing methods.

@@ -95,7 +95,8 @@ def grasp_candidates(vertices: np.ndarray, keypoint: np.ndarray, pitches_deg, ro
     """Every (yaw, pitch, roll) grasp, yaw-major, then pitch, in the given orders."""
     return tuple(
         Grasp(f"pitch{p:g}_roll{r:g}" if y == 0 else f"yaw{y:g}_pitch{p:g}_roll{r:g}",
-              tuple(grasp_in_keypoint(vertices, keypoint, p, r, band_m, standoff_m, y).ravel()))
+              tuple(grasp_in_keypoint(vertices, keypoint, p, r, band_m, standoff_m, y)
+                    .ravel().tolist()))  # Python floats: every trial task pickles 288 of them
         for y in yaws_deg for p in pitches_deg for r in rolls_deg)
 
 

@@ -165,3 +165,24 @@ def test_only_the_oracles_fall_back_to_the_supports_other_stored_skts(evaluated,
             assert len(task.alternatives) == 1 and np.allclose(task.alternatives[0], s.others[0])
         for m in ("kpam", "sctdn", "template_only", "vatmart", "omnihang"):
             assert make_task(m, s, objects[0], s.gt, settings).alternatives == ()
+
+
+def test_trial_tasks_carry_plain_floats_and_pickle_small(evaluated):
+    """A task goes to a worker for every trial: its numbers are Python floats (numpy scalars
+    pickled ten times larger and slower), the same values as the arrays they came from."""
+    import pickle
+
+    params_path, data, _, _ = evaluated
+    p = load_params(params_path)
+    supports, objects, _ = load_test_set(data, p.clustering.T, p.common.seed, (45.0, 30.0),
+                                         (0.0, 180.0), (0.0, 90.0))
+    s, o = supports[0], objects[0]
+    task = make_task("oracle", s, o, s.gt, trial_settings(p.sim_eval, p.contact_sim))
+    numbers = [*task.keypoint, task.object_radius_m, *(v for x in task.positions for v in x),
+               *(v for g in task.grasps for v in g.kpt_ee),
+               *(v for k in task.alternatives for x in k for v in x)]
+    assert numbers and all(type(v) is float for v in numbers)
+    assert np.array_equal(np.asarray(task.positions), s.gt)
+    assert np.array_equal(np.asarray(task.keypoint).reshape(4, 4), o.keypoint)
+    # 16 floats per grasp at 9 bytes each, with its label: well under 200 bytes a grasp
+    assert len(pickle.dumps(task)) < 2000 + 200 * len(task.grasps)
