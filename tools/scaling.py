@@ -159,11 +159,12 @@ def fresh_repro(work: Path) -> dict:
     subprocess.run(["git", "clone", "-q", str(ROOT), str(d)], check=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=d, text=True,
                             capture_output=True, check=True).stdout.strip()
-    print(f"fresh clone of {commit}: make repro in {d} (log {d / 'repro.log'})", flush=True)
+    log = work / "fresh-repro.log"  # outside the clone: its git status is part of the result
+    print(f"fresh clone of {commit}: make repro in {d} (log {log})", flush=True)
     mon, cloned = TreeMonitor(), time.monotonic() - t0
-    rc, wall, per_stage = run_monitored(["make", "repro"], d, None, d / "repro.log", mon)
+    rc, wall, per_stage = run_monitored(["make", "repro"], d, None, log, mon)
     if rc != 0:
-        raise SystemExit(f"make repro exited {rc}; see {d / 'repro.log'}")
+        raise SystemExit(f"make repro exited {rc}; see {log}")
     clean = subprocess.run(["git", "status", "--porcelain"], cwd=d, text=True,
                            capture_output=True, check=True).stdout.strip()
     return {"commit": commit, "wall_s": time.monotonic() - t0, "setup_s": cloned + mon.first_seen,
@@ -229,7 +230,11 @@ def presets_summary(data: dict) -> str:
              "|---|---|---|---|"]
     lines += [f"| {'embedded default' if r['n_supports'] == default else 'default, resized'}"
               f" | {r['n_supports']} | {k * r['n_supports']:,} | {r['wall_s'] / 60:.0f} min "
-              "(measured) |" for r in runs]
+              f"(measured at {r['commit']}) |" for r in runs]
+    if f := data.get("fresh_repro"):
+        lines.append(f"| embedded default, fresh clone + `make repro` (set-up included) | "
+                     f"{default} | {k * default:,} | {f['wall_s'] / 60:.1f} min (measured at "
+                     f"{f['commit']}) |")
     if paper:
         slowest = max(paper, key=paper.get)
         lines.append(f"| paper | {PAPER['n_supports']} | "
