@@ -67,7 +67,12 @@ def test_extrapolation_and_tables():
     assert "| `rrt_skts` | " in table and "| 1.20 | 800 |" in table
     assert "extrapolat" in table
     summary = scaling.presets_summary(data)
-    assert "| embedded default | 120 | 480 |" in summary
+    assert "| embedded default | 120 | 480 | 33 min (measured at abc) |" in summary
+    assert "fresh clone" not in summary
+    data["fresh_repro"] = {"commit": "def", "wall_s": 1700.0, "setup_s": 90.0, "stages": {},
+                           "git_status_clean": True}
+    assert ("| embedded default, fresh clone + `make repro` (set-up included) | 120 | 480 | "
+            "28.3 min (measured at def) |") in scaling.presets_summary(data)
     assert f"≈ {sum(paper.values()) / 3600:.1f} h (**extrapolated**; `rrt_skts`" in summary
     assert scaling.table({"runs": []}).startswith("Not measured")
 
