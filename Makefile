@@ -28,9 +28,11 @@ $(STAMP): pyproject.toml requirements.lock
 	$(BIN)/pip install -q torch==2.13.0
 	@# every other package at the version requirements.lock pins: no resolution, no drift.
 	@# uv installs them (about 4x faster than pip here, caches empty); pip does it
-	@# where uv cannot reach the package index.
+	@# where uv cannot reach the package index. Bytecode compiled now, as pip does: with
+	@# PYTHONDONTWRITEBYTECODE set, every process would compile its imports from source.
 	$(BIN)/pip install -q uv==$(UV_VERSION)
-	$(BIN)/uv pip install -q --python $(BIN)/python --no-deps -r requirements.lock \
+	$(BIN)/uv pip install -q --compile-bytecode --python $(BIN)/python --no-deps \
+	  -r requirements.lock \
 	  || $(BIN)/pip install -q --no-deps -r requirements.lock
 	$(BIN)/pip install -q --no-deps -e .
 	$(BIN)/pip check

@@ -45,3 +45,14 @@ def test_lock_pins_every_declared_dependency_at_its_version():
     assert len(lock) > 3 * len(declared)
     makefile = (ROOT / "Makefile").read_text()
     assert f"torch=={declared['torch']}" in makefile and "--no-deps -r requirements.lock" in makefile
+
+
+def test_make_env_compiles_bytecode_and_falls_back_to_pip():
+    """uv installs the lock without bytecode unless asked; with PYTHONDONTWRITEBYTECODE set
+    (it is, on the CI machine) every stage and worker then compiled its imports from source
+    (measured: 9 s against 5 s per process). pip stays the fallback."""
+    makefile = (ROOT / "Makefile").read_text()
+    uv = makefile[makefile.index("uv pip install"):].split("||")[0]
+    assert "--compile-bytecode" in uv and "--no-deps" in uv and "requirements.lock" in uv
+    assert "|| $(BIN)/pip install -q --no-deps -r requirements.lock" in makefile
+    assert "uv==" in (ROOT / "requirements.lock").read_text()
