@@ -165,10 +165,17 @@ def fresh_repro(work: Path) -> dict:
     rc, wall, per_stage = run_monitored(["make", "repro"], d, None, log, mon)
     if rc != 0:
         raise SystemExit(f"make repro exited {rc}; see {log}")
-    clean = subprocess.run(["git", "status", "--porcelain"], cwd=d, text=True,
-                           capture_output=True, check=True).stdout.strip()
-    return {"commit": commit, "wall_s": time.monotonic() - t0, "setup_s": cloned + mon.first_seen,
-            "stages": per_stage, "git_status_clean": not clean}
+    wall = time.monotonic() - t0
+    dirty = changed_files(d)
+    return {"commit": commit, "wall_s": wall, "setup_s": cloned + mon.first_seen,
+            "stages": per_stage, "git_status_clean": not dirty, "git_status": dirty}
+
+
+def changed_files(repo: Path) -> list[str]:
+    """``git status --porcelain`` of ``repo``, one ``"XY path"`` line each."""
+    out = subprocess.run(["git", "status", "--porcelain"], cwd=repo, text=True,
+                         capture_output=True, check=True).stdout
+    return [line for line in out.splitlines() if line.strip()]
 
 
 def fresh_summary(data: dict) -> str:
@@ -182,7 +189,8 @@ def fresh_summary(data: dict) -> str:
             f"{f['setup_s'] / 60:.1f} min of it; the longest stages "
             + ", ".join(f"`{s}` {v['wall_s'] / 60:.1f} min" for s, v in slow)
             + ("; `git status` clean after it." if f["git_status_clean"]
-               else "; `git status` **not** clean after it."))
+               else "; `git status` **not** clean after it ("
+               + ", ".join(f"`{line[3:]}`" for line in f.get("git_status", [])) + ")."))
 
 
 def table(data: dict) -> str:

@@ -103,4 +103,5 @@ def test_fresh_clones_and_runs_make_repro_with_set_up_timed(tmp_path, monkeypatc
     assert len(f["commit"]) >= 7
     text = scaling.fresh_summary({"machine": "2 cores", "fresh_repro": f})
     assert f"commit {f['commit']}" in text and "`toy`" in text and "**not** clean" in text
+    assert f["git_status"] == ["?? untracked.txt"] and "(`untracked.txt`)" in text
     assert scaling.fresh_summary({}).startswith("Not measured")
