@@ -20,7 +20,6 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.io import read_table
 from skt_lib.learning.data import load_training_set
 from skt_lib.learning.predictor import SktPredictor
-from skt_lib.learning.pointnet2 import geometry_memo
 from skt_lib.learning.train import from_params, predict_items, summarise, train_sctdn
 from skt_lib.schemas import SUPPORTS
 from stages._common import parse_args
@@ -40,8 +39,7 @@ def main(argv=None) -> int:
     cfg, settings = from_params(p, k, T, data.n_points)
     history: list[dict] = []
     t0 = time.perf_counter()
-    with (Live(dir=str(rep / "live"), save_dvc_exp=False, dvcyaml=None, report=None) as live,
-          geometry_memo()):  # a view drawn again in a later epoch is not searched again
+    with Live(dir=str(rep / "live"), save_dvc_exp=False, dvcyaml=None, report=None) as live:
         def on_epoch(epoch, metrics):
             for name, value in metrics.items():
                 if value is not None:  # no rate where nothing was measured (see summarise)

@@ -9,6 +9,7 @@ import numpy as np
 import torch
 
 from skt_lib.learning.data import SupportData, normalise
+from skt_lib.learning.pointnet2 import geometry_memo
 from skt_lib.learning.sctdn import Sctdn, SctdnConfig, sctdn_loss, traj_distance
 
 
@@ -134,9 +135,12 @@ def fit(make_model: Callable[[], torch.nn.Module], batch_loss, validate, train: 
     support and steps on ``batch_loss(model, batch) -> (loss, {part: float})``; then
     ``validate(model) -> metrics`` and keeps the weights with the lowest ``metrics[select]``.
     Returns (model with those weights, their metrics). Torch's global RNG is used only inside
-    ``fork_rng`` (nothing leaks to the caller); ``make_model`` runs right after it is seeded."""
+    ``fork_rng`` (nothing leaks to the caller); ``make_model`` runs right after it is seeded.
+    Sampling and neighbour searches are kept per cloud (:func:`geometry_memo`; inside an outer
+    one, e.g. several models on the same views, they are shared): a view drawn again is not
+    searched again."""
     rng = np.random.default_rng(seed)
-    with torch.random.fork_rng(), reproducible(st.threads):
+    with torch.random.fork_rng(), reproducible(st.threads), geometry_memo():
         torch.manual_seed(seed)
         model = make_model()
         opt = torch.optim.Adam(model.parameters(), lr=st.lr, weight_decay=st.weight_decay)

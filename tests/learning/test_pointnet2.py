@@ -428,14 +428,21 @@ def test_geometry_memo_gives_the_same_weights_and_skips_repeated_searches(monkey
         model, best = train_sctdn(cfg, templates, sup[:3], sup[3:], st, seed=5)
         return model.state_dict(), best
 
-    plain_w, plain_best = train()
-    assert pointnet2._memo is None
+    real = pointnet2._per_cloud
+    computed = []
+    with monkeypatch.context() as m:  # fit keeps its own memo: bypass it for the plain run
+        m.setattr(pointnet2, "_per_cloud", lambda op, args, arrays, compute: compute())
+        plain_w, plain_best = train()
+    monkeypatch.setattr(pointnet2, "_per_cloud", lambda op, args, arrays, compute: real(
+        op, args, arrays, lambda: computed.append(op) or compute()))
     with pointnet2.geometry_memo():
-        memo_w, memo_best = train()
+        memo_w, memo_best = train()  # fit's memo is this outer one: shared, kept after it
         kept = len(pointnet2._memo)
-        # at these sizes the first level's ball query and the finest 3-NN take the KD-tree
-        assert {"fps", "ball_query", "three_nn"} <= _ops_seen(monkeypatch, sup)
-    assert pointnet2._memo is None and kept > 0
+    monkeypatch.setattr(pointnet2, "_per_cloud", real)
+    assert pointnet2._memo is None and 0 < kept == len(computed)
+    # at these sizes the first level's ball query and the finest 3-NN take the KD-tree
+    assert {"fps", "ball_query", "three_nn"} <= set(computed)
+    assert {"fps", "ball_query", "three_nn"} <= _ops_seen(monkeypatch, sup)
     assert plain_best == memo_best
     assert plain_w.keys() == memo_w.keys()
     for k in plain_w:
