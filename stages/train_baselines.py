@@ -21,8 +21,8 @@ from tqdm import tqdm
 
 from skt_lib.config import load_params
 from skt_lib.learning.data import load_training_set
-from skt_lib.learning.predictor import SktPredictor
 from skt_lib.learning.pointnet2 import geometry_memo
+from skt_lib.learning.predictor import SktPredictor
 from skt_lib.learning.train import from_params, train_sctdn
 from skt_lib.learning.train_baselines import train_vatmart, vatmart_config
 from skt_lib.learning.vatmart import VatMartPredictor

@@ -8,8 +8,14 @@ from scipy.spatial.transform import Rotation
 
 from skt_lib.geometry.se3 import matrix_to_quat, matrix_to_quat_naive
 from skt_lib.geometry.skt import (
-    cross3, interpolate, interpolate_naive, minimal_rotation, minimal_rotation_naive,
-    rotvec_matrix, skt_frames, skt_frames_naive,
+    cross3,
+    interpolate,
+    interpolate_naive,
+    minimal_rotation,
+    minimal_rotation_naive,
+    rotvec_matrix,
+    skt_frames,
+    skt_frames_naive,
 )
 from skt_lib.planning.threading import limit_direction
 
