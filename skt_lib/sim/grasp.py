@@ -127,7 +127,7 @@ def choose_grasp(world: World, robot: Panda, path: np.ndarray, grasps: tuple[Gra
     failures = []
     for i, g in enumerate(grasps):
         kpt_ee = g.matrix()
-        targets = list(SUPPORT_POSE_WORLD @ (path @ kpt_ee))  # = to_world(ξ · T_kpt_ee)
+        targets = SUPPORT_POSE_WORLD @ (path @ kpt_ee)  # = to_world(ξ · T_kpt_ee), (M, 4, 4)
         out = robot.joint_path(targets, tol_m, tol_rad, max_jump_rad, restarts, start_ok, first_blocked)
         if isinstance(out, IKFailure):
             failures.append(out)

@@ -14,12 +14,18 @@ from numba import njit
 
 
 @njit(cache=True)
-def _mul44(a, b):
-    out = np.empty((4, 4))
+def _mul44_into(a, b, out):
+    """``out = a @ b`` (4×4; ``out`` must not be ``a`` or ``b``)."""
     for i in range(4):
         for j in range(4):
             out[i, j] = (a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
                          + a[i, 3] * b[3, j])
+
+
+@njit(cache=True)
+def _mul44(a, b):
+    out = np.empty((4, 4))
+    _mul44_into(a, b, out)
     return out
 
 
@@ -30,11 +36,13 @@ def fk_jacobian(base, pre, tail, axes, skew, skew2, prismatic, q):
     (n, 3, 3): the axis' cross-product matrix and its square)."""
     n = q.shape[0]
     t = base.copy()
+    u = np.empty((4, 4))  # t and u take turns as the product (no array per multiplication)
     axes_w = np.empty((n, 3))
     origins = np.empty((n, 3))
     m = np.empty((4, 4))
     for i in range(n):
-        t = _mul44(t, pre[i])
+        _mul44_into(t, pre[i], u)
+        t, u = u, t
         for r in range(3):
             axes_w[i, r] = t[r, 0] * axes[i, 0] + t[r, 1] * axes[i, 1] + t[r, 2] * axes[i, 2]
             origins[i, r] = t[r, 3]
@@ -49,7 +57,8 @@ def fk_jacobian(base, pre, tail, axes, skew, skew2, prismatic, q):
             for r in range(3):
                 for k in range(3):
                     m[r, k] += s * skew[i, r, k] + c * skew2[i, r, k]
-        t = _mul44(t, m)
+        _mul44_into(t, m, u)
+        t, u = u, t
     t = _mul44(t, tail)
     jac = np.zeros((6, n))
     for i in range(n):
@@ -88,10 +97,10 @@ def rotation_error(target, current):
 
 
 @njit(cache=True)
-def _spd_inverse(a):
-    """Inverse of a symmetric positive-definite matrix (Cholesky)."""
+def _spd_inverse(a, low, inv, y):
+    """``inv`` = inverse of the symmetric positive-definite ``a`` (Cholesky); ``low``
+    (n, n) and ``y`` (n,) are work arrays (every entry read is written first)."""
     n = a.shape[0]
-    low = np.zeros((n, n))
     for j in range(n):
         d = a[j, j]
         for k in range(j):
@@ -102,9 +111,7 @@ def _spd_inverse(a):
             for k in range(j):
                 v -= low[i, k] * low[j, k]
             low[i, j] = v / low[j, j]
-    inv = np.zeros((n, n))
     for c in range(n):  # solve L y = e_c, then Lᵀ x = y
-        y = np.zeros(n)
         for i in range(n):
             v = 1.0 if i == c else 0.0
             for k in range(i):
@@ -115,43 +122,54 @@ def _spd_inverse(a):
             for k in range(i + 1, n):
                 v -= low[k, i] * inv[k, c]
             inv[i, c] = v / low[i, i]
-    return inv
 
 
 @njit(cache=True)
-def bounded_step(jac, err, q, rest, lower, upper, damping, rest_gain, max_step):
+def workspace(n):
+    """The work arrays of :func:`bounded_step` for ``n`` joints, made once per solve (not
+    once per iteration: allocation was a fifth of the solve's time)."""
+    return (np.empty(n, np.bool_), np.empty(n), np.empty(n, np.int64), np.empty(6),
+            np.empty((6, 6)), np.empty((6, 6)), np.empty((6, 6)), np.empty(6),
+            np.empty((n, 6)), np.empty(n), np.empty(6))
+
+
+@njit(cache=True)
+def bounded_step(jac, err, q, rest, lower, upper, damping, rest_gain, max_step, ws):
     """One DLS step with the null-space rest pull; joints that would leave their range are
-    held at the bound and the step solved again for the others; scaled to ``max_step``."""
+    held at the bound and the step solved again for the others; scaled to ``max_step``.
+    ``ws``: :func:`workspace`; the step is returned in its ``dq`` (valid until the next call)."""
+    free, dq, idx, resid, jj, low, inv, y, pinv, pull, jpull = ws
     n = q.shape[0]
-    free = np.ones(n, np.bool_)
-    dq = np.zeros(n)
+    free[:] = True
+    dq[:] = 0.0
     for _ in range(n):
-        idx = np.nonzero(free)[0]
-        m = idx.shape[0]
-        resid = err.copy()
+        m = 0
+        for j in range(n):
+            if free[j]:
+                idx[m] = j
+                m += 1
+        resid[:] = err
         for j in range(n):
             if not free[j]:
                 for r in range(6):
                     resid[r] -= jac[r, j] * dq[j]
-        jj = np.empty((6, 6))
         for r in range(6):
             for c in range(6):
                 v = 0.0
-                for k in idx:
+                for a in range(m):
+                    k = idx[a]
                     v += jac[r, k] * jac[c, k]
                 jj[r, c] = v + (damping ** 2 if r == c else 0.0)
-        inv = _spd_inverse(jj)
-        pinv = np.zeros((m, 6))  # jfᵀ (jf jfᵀ + λ² I)⁻¹
-        for a in range(m):
+        _spd_inverse(jj, low, inv, y)
+        for a in range(m):  # pinv = jfᵀ (jf jfᵀ + λ² I)⁻¹
             for c in range(6):
                 v = 0.0
                 for r in range(6):
                     v += jac[r, idx[a]] * inv[r, c]
                 pinv[a, c] = v
-        pull = np.empty(m)
         for a in range(m):
             pull[a] = rest_gain * (rest[idx[a]] - q[idx[a]])
-        jpull = np.zeros(6)  # jf @ pull
+        jpull[:] = 0.0  # jf @ pull
         for r in range(6):
             for a in range(m):
                 jpull[r] += jac[r, idx[a]] * pull[a]
@@ -166,14 +184,21 @@ def bounded_step(jac, err, q, rest, lower, upper, damping, rest_gain, max_step):
                 any_out = True
         if not any_out:
             break
-        for j in idx:
+        for a in range(m):
+            j = idx[a]
             if q[j] + dq[j] < lower[j] or q[j] + dq[j] > upper[j]:
                 dq[j] = min(max(dq[j], lower[j] - q[j]), upper[j] - q[j])
                 free[j] = False
         if not free.any():
             break
-    big = np.abs(dq).max()
-    return dq * (max_step / big) if big > max_step else dq
+    big = 0.0  # np.abs(dq).max()
+    for j in range(n):
+        big = max(big, abs(dq[j]))
+    if big > max_step:
+        scale = max_step / big
+        for j in range(n):
+            dq[j] = dq[j] * scale
+    return dq
 
 
 @njit(cache=True)
@@ -186,6 +211,7 @@ def solve(base, pre, tail, axes, skew, skew2, prismatic, lower, upper, target, q
     best_q, best_d, best_a = q.copy(), np.inf, np.inf
     err = np.empty(6)
     wjac = np.empty((6, q.shape[0]))
+    ws = workspace(q.shape[0])
     for it in range(max_iterations):
         t, jac = fk_jacobian(base, pre, tail, axes, skew, skew2, prismatic, q)
         e_rot = rotation_error(target[:3, :3], t[:3, :3])
@@ -200,6 +226,32 @@ def solve(base, pre, tail, axes, skew, skew2, prismatic, lower, upper, target, q
         err *= w
         for r in range(6):
             wjac[r] = w[r] * jac[r]
-        dq = bounded_step(wjac, err, q, rest, lower, upper, damping, rest_gain, max_step)
-        q = np.minimum(np.maximum(q + dq, lower), upper)
+        dq = bounded_step(wjac, err, q, rest, lower, upper, damping, rest_gain, max_step, ws)
+        for j in range(q.shape[0]):  # np.minimum(np.maximum(q + dq, lower), upper), in place
+            q[j] = min(max(q[j] + dq[j], lower[j]), upper[j])
     return best_q, best_d, best_a
+
+
+@njit(cache=True)
+def track(base, pre, tail, axes, skew, skew2, prismatic, lower, upper, targets, q_start, rest,
+          ik_tol_m, ik_tol_rad, max_iterations, damping, rot_weight_m, max_step, rest_gain,
+          tol_m, tol_rad, max_jump):
+    """:meth:`~skt_lib.sim.kinematics.Chain.track`: each of ``targets (K, 4, 4)`` solved in
+    order from the previous solution (``q_start`` before the first); ``(path (K + 1, n),
+    status, k, d, a, jump)`` — status 0: every target within ``tol_m``/``tol_rad`` and
+    ``max_jump``; 1: target ``k`` out of tolerance; 2: its joint change above ``max_jump``
+    (``path`` then valid up to row ``k``)."""
+    n_targets = targets.shape[0]
+    path = np.empty((n_targets + 1, q_start.shape[0]))
+    path[0] = q_start
+    for k in range(n_targets):
+        q, d, a = solve(base, pre, tail, axes, skew, skew2, prismatic, lower, upper, targets[k],
+                        path[k], rest, ik_tol_m, ik_tol_rad, max_iterations, damping,
+                        rot_weight_m, max_step, rest_gain)
+        jump = np.abs(q - path[k]).max()
+        if d > tol_m or a > tol_rad:
+            return path, 1, k, d, a, jump
+        if jump > max_jump:
+            return path, 2, k, d, a, jump
+        path[k + 1] = q
+    return path, 0, -1, 0.0, 0.0, 0.0

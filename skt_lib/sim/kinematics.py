@@ -199,6 +199,36 @@ class Chain:
             q = np.clip(q + dq, lo, hi)
         return best
 
+    def track(self, targets: np.ndarray, q_start, q_rest, settings: IKSettings, tol_m: float,
+              tol_rad: float, max_jump: float) -> tuple[np.ndarray, tuple | None]:
+        """Solve each of ``targets (K, 4, 4)`` in order, from the solution before it
+        (``q_start`` before the first), pulled toward ``q_rest``; stop at the first solution
+        off ``target`` by more than ``tol_m``/``tol_rad`` or more than ``max_jump`` (any
+        joint) from the one before. Returns ``(path (K + 1, n), None)`` with ``q_start``
+        first, or ``(path so far, (check, k, d, a, jump))`` — ``check`` "tracking_tolerance"
+        or "joint_jump" at target ``k`` — exactly as one :meth:`solve` per target would
+        (compiled: one kernel call for the whole path, :func:`ik_kernel.track`)."""
+        s = settings
+        if self.compiled:
+            path, status, k, d, a, jump = ik_kernel.track(
+                *self._packed, np.ascontiguousarray(targets, float), np.asarray(q_start, float),
+                np.asarray(q_rest, float), s.tol_m, s.tol_rad, s.max_iterations, s.damping,
+                s.rot_weight_m, s.max_step_rad, s.rest_gain, tol_m, tol_rad, max_jump)
+            if status == 0:
+                return path, None
+            check = "tracking_tolerance" if status == 1 else "joint_jump"
+            return path[:k + 1], (check, int(k), float(d), float(a), float(jump))
+        path = [np.asarray(q_start, float)]
+        for k, target in enumerate(targets):
+            q, d, a = self.solve(target, path[-1], q_rest, settings)
+            jump = float(np.abs(q - path[-1]).max())
+            if d > tol_m or a > tol_rad:
+                return np.stack(path), ("tracking_tolerance", k, d, a, jump)
+            if jump > max_jump:
+                return np.stack(path), ("joint_jump", k, d, a, jump)
+            path.append(q)
+        return np.stack(path), None
+
     def _bounded_step(self, jac, err, q, rest, s: IKSettings) -> np.ndarray:
         """One DLS step with the null-space rest pull, the joints that would leave their
         range held at the bound (active set, at most n rounds), scaled to ``max_step_rad``."""

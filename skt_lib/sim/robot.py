@@ -9,6 +9,7 @@ path is solved from its last pose — the hang, where the hand is most constrain
 several start configurations, and tracked backward pose by pose to the start.
 """
 
+import functools
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -65,6 +66,18 @@ def rank(f: IKFailure) -> tuple[int, int]:
     """How far a failed start configuration got: tracked to the start but not clear, beats
     tracked part of the way (the fewer poses left the better), beats an unreachable hang."""
     return _STAGE[f.check], -f.index
+
+
+@functools.lru_cache(maxsize=8)
+def _start_seeds(n: int, lower: tuple, upper: tuple) -> tuple[np.ndarray, ...]:
+    """:meth:`Panda.start_seeds`, drawn once per process (a trial tries it per grasp
+    candidate: hundreds of times)."""
+    rng = np.random.default_rng(0)
+    seeds = (np.asarray(REST_Q, float),
+             *(rng.uniform(np.array(lower), np.array(upper)) for _ in range(n - 1)))
+    for s in seeds:
+        s.flags.writeable = False
+    return seeds
 
 
 class Panda:
@@ -130,17 +143,16 @@ class Panda:
 
     def start_seeds(self, n: int) -> list[np.ndarray]:
         """IK start configurations: :data:`REST_Q`, then ``n − 1`` fixed pseudo-random ones
-        inside the joint limits (the same list every time)."""
-        rng = np.random.default_rng(0)
-        return [np.asarray(REST_Q)] + [rng.uniform(self.lower, self.upper) for _ in range(n - 1)]
+        inside the joint limits (the same list every time; read-only arrays)."""
+        return list(_start_seeds(n, tuple(self.lower), tuple(self.upper)))
 
-    def joint_path(self, targets: list[np.ndarray], tol_m: float, tol_rad: float,
+    def joint_path(self, targets: np.ndarray, tol_m: float, tol_rad: float,
                    max_jump_rad: float, restarts: int,
                    accept_start: Callable[[np.ndarray], bool] | None = None,
                    first_blocked: Callable[[np.ndarray], int] | None = None
                    ) -> np.ndarray | IKFailure:
         """Set-up (kinematic, before a trial): joint positions ``(M, 7)`` that put the grasp
-        target on every pose of ``targets`` (M world poses, 4×4, execution order) within
+        target on every pose of ``targets`` ((M, 4, 4) world poses, execution order) within
         ``tol_m``/``tol_rad``, each within ``max_jump_rad`` (every joint) of the previous one.
 
         The last pose (the hang) is solved from each of :meth:`start_seeds` in order; every
@@ -150,6 +162,7 @@ class Panda:
         returns a pose index ≥ 0 (e.g. the arm through the support). Returns the path of the
         first seed that passes, else the :class:`IKFailure` of the seed that got furthest.
         Leaves the arm at the path's start (at the last configuration tried on failure)."""
+        targets = np.asarray(targets, float)
         n = len(targets)
         worst: IKFailure | None = None
         ends: list[np.ndarray] = []
@@ -196,16 +209,12 @@ class Panda:
         or ``(IKFailure, None, None)`` at the first pose that fails."""
         n = len(targets)
         index = [*range(n - 1, 0, -stride), 0] if n > 1 else [0]
-        path = [q_end]
-        for k in index[1:]:
-            q, d, a = self.chain.solve(targets[k], path[-1], self.mid, settings=TRACK_IK)
-            jump = float(np.abs(q - path[-1]).max())
-            if d > tol_m or a > tol_rad:
-                return IKFailure("tracking_tolerance", k, n, d, a, jump), None, None
-            if jump > max_jump_rad:
-                return IKFailure("joint_jump", k, n, d, a, jump), None, None
-            path.append(q)
-        return None, np.stack(path[::-1]), index[::-1]
+        path, fail = self.chain.track(np.asarray(targets)[index[1:]], q_end, self.mid, TRACK_IK,
+                                      tol_m, tol_rad, max_jump_rad)
+        if fail is not None:
+            check, k, d, a, jump = fail
+            return IKFailure(check, index[k + 1], n, d, a, jump), None, None
+        return None, np.ascontiguousarray(path[::-1]), index[::-1]
 
     def pose_error(self, target_world: np.ndarray) -> tuple[float, float]:
         """(position error m, rotation error rad) of the grasp target against a target."""
