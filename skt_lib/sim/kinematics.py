@@ -218,6 +218,13 @@ class Chain:
                 return path, None
             check = "tracking_tolerance" if status == 1 else "joint_jump"
             return path[:k + 1], (check, int(k), float(d), float(a), float(jump))
+        return self.track_naive(targets, q_start, q_rest, settings, tol_m, tol_rad, max_jump)
+
+    def track_naive(self, targets: np.ndarray, q_start, q_rest, settings: IKSettings,
+                    tol_m: float, tol_rad: float,
+                    max_jump: float) -> tuple[np.ndarray, tuple | None]:
+        """:meth:`track` as one :meth:`solve` call per target: the numpy chain's tracker and
+        the reference the compiled one is tested bit-equal against."""
         path = [np.asarray(q_start, float)]
         for k, target in enumerate(targets):
             q, d, a = self.solve(target, path[-1], q_rest, settings)

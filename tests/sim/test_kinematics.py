@@ -104,25 +104,10 @@ def test_the_compiled_solve_equals_the_numpy_reference(chain):
         assert d == pytest.approx(d_ref, abs=1e-10) and a == pytest.approx(a_ref, abs=1e-9)
 
 
-def _track_by_solves(chain, targets, q_start, q_rest, settings, tol_m, tol_rad, max_jump):
-    """What set-up did before :meth:`Chain.track`: one :meth:`Chain.solve` call per pose."""
-    path = [q_start]
-    for k, target in enumerate(targets):
-        q, d, a = chain.solve(target, path[-1], q_rest, settings)
-        jump = float(np.abs(q - path[-1]).max())
-        if d > tol_m or a > tol_rad:
-            return np.stack(path), ("tracking_tolerance", k, d, a, jump)
-        if jump > max_jump:
-            return np.stack(path), ("joint_jump", k, d, a, jump)
-        path.append(q)
-    return np.stack(path), None
-
-
-@pytest.mark.parametrize("compiled", [True, False])
-def test_track_equals_one_solve_per_pose_bit_for_bit(compiled):
+def test_track_equals_one_solve_per_pose_bit_for_bit(chain):
     """Joint paths along smooth joint-space curves (tracked, off tolerance, jumping): the
-    one-call path tracker gives the very bits of a solve per pose, and the same failure."""
-    chain = Chain(PANDA_URDF, "panda_grasptarget", BASE, compiled=compiled)
+    one-call compiled tracker gives the very bits of a compiled solve per pose
+    (``track_naive``), and the same failure."""
     settings = IKSettings(max_iterations=20, rest_gain=0.05)
     mid = (chain.lower + chain.upper) / 2.0
     rng = np.random.default_rng(4)
@@ -136,8 +121,8 @@ def test_track_equals_one_solve_per_pose_bit_for_bit(compiled):
         q0, _, _ = chain.solve(targets[0], a, settings=IKSettings(max_iterations=100))
         for tol_m, jump in ((2e-3, 0.2), (2e-3, 0.02), (1e-9, 0.2)):
             path, fail = chain.track(targets[1:], q0, mid, settings, tol_m, 0.02, jump)
-            ref_path, ref_fail = _track_by_solves(chain, targets[1:], q0, mid, settings, tol_m,
-                                                  0.02, jump)
+            ref_path, ref_fail = chain.track_naive(targets[1:], q0, mid, settings, tol_m, 0.02,
+                                                   jump)
             assert fail == ref_fail
             assert path.shape == ref_path.shape and np.array_equal(path, ref_path)
             outcomes.add(None if fail is None else fail[0])
