@@ -248,7 +248,7 @@ class SimEvalParams(_Section):
     methods: tuple[Literal[METHODS], ...] = Field(
         min_length=1, description="Methods evaluated (Table I rows); oracle_floating: the oracle SKT carried by a floating hand (no arm); sctdn_cp_feature, vatmart, vatmart_mod need train_baselines to train them; omnihang plans with OMPL on the cloud, given the ground-truth hang.")
     n_proposals: int = Field(ge=1, le=100, description="VAT-Mart methods: proposals per support; a (support, object) trial succeeds if any proposal hangs (the paper's count); success_single counts the first proposal only.")
-    omnihang_time_limit_s: float = Field(gt=0.0, le=600.0, description="omnihang: RRT-Connect time limit per support (a failed plan falls back to the straight approach).")
+    omnihang_max_checks: int = Field(ge=100, le=10_000_000, description="omnihang: RRT-Connect budget per support, in collision checks (deterministic, unlike a time limit; a failed plan falls back to the straight approach).")
     robot_base_m: tuple[float, float, float] = Field(description="World position of the Panda base, m.")
     linear_damping: float = Field(ge=0.0, le=10.0, description="Object linear damping (1/s) while carried, released and perturbed; PyBullet's default 0.04, as the anchors' (DESIGN §5).")
     angular_damping: float = Field(ge=0.0, le=10.0, description="Object angular damping (1/s) while carried, released and perturbed; PyBullet's default 0.04.")

@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     omni_settings = OmniHangSettings(
         start_offset_m=(float(np.mean(params.rrt_skts.start_dx_m)), 0.0,
                         float(np.mean(params.rrt_skts.start_dz_m))),
-        time_limit_s=p.omnihang_time_limit_s)
+        max_checks=p.omnihang_max_checks)
     seed = params.common.seed
 
     def make(m: str, s):

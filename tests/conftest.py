@@ -31,7 +31,7 @@ TINY = {
                         "hidden": 64, "n_control_points": 4, "vatmart_kl_weight": 0.1, "vatmart_mod_kl_weight": 0.01},
     "sim_eval": {"methods": ["oracle", "oracle_floating", "template_only", "sctdn", "kpam",
                              "vatmart", "omnihang"],
-                 "n_proposals": 3, "omnihang_time_limit_s": 5.0,
+                 "n_proposals": 3, "omnihang_max_checks": 20000,
                  "robot_base_m": [0.15, 0.0, 0.3], "linear_damping": 0.04, "angular_damping": 0.04,
                  "settle_linear_damping": 1.0, "settle_angular_damping": 5.0, "grasp_pitch_deg": [45.0, 30.0, 60.0],
                  "grasp_rolls_deg": [0.0, 180.0], "grasp_yaws_deg": [0.0], "setup_clearance_m": 0.002, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,

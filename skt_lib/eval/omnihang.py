@@ -36,12 +36,13 @@ positions in the support frame, ξ_0 = release at the hang first, ξ_{T-1} = sta
   which is re-seeded from ``seed`` right before the planner is built (OMPL logs an error that
   re-seeding after the first RNG "will not lead to deterministic sampling"; it does re-seed
   the generator, so every RNG made afterwards is seeded from ``seed``; the message is
-  silenced). RRT-Connect stops at the first connection, so a solved plan depends on the inputs
-  and ``seed`` only; the time limit decides only *whether* it is solved. Not thread-safe:
-  plan in processes, not threads, when planning in parallel.
-- **Failure.** When the start or goal cannot be made valid or no path is found in
-  ``time_limit_s``, the plan is the straight line start → lead-in point → release, resampled
-  to ``T``, with ``solved=False``: a best-effort path that the trial then judges.
+  silenced). RRT-Connect stops at the first connection or when it has spent ``max_checks``
+  collision checks — a budget counted, not timed, so whether a plan is solved does not depend
+  on the machine's speed either. Not thread-safe: plan in processes, not threads, when
+  planning in parallel.
+- **Failure.** When the start or goal cannot be made valid or no path is found within
+  ``max_checks`` collision checks, the plan is the straight line start → lead-in point →
+  release, resampled to ``T``, with ``solved=False``: a best-effort path that the trial then judges.
 
 Guarantee of a solved plan: the polyline the planner certified (RRT path after shortcutting,
 plus the lead-in) is clear by ``clearance_m`` at every check point ``check_step_m`` apart.
@@ -88,8 +89,9 @@ class OmniHangSettings:
     """RRT-Connect's longest edge."""
     check_step_m: float = 0.002
     """Motion-check resolution: distance between checked states along an edge."""
-    time_limit_s: float = 10.0
-    """RRT-Connect wall-time budget; only decides whether a plan is found."""
+    max_checks: int = 20000
+    """RRT-Connect's budget in collision checks (of states and along edges); only decides
+    whether a plan is found, and the same on every machine (a wall-time limit would not be)."""
     shortcut_steps: int = 100
     """Random shortcut attempts (seeded, each checked densely)."""
 
@@ -191,7 +193,7 @@ def plan_omnihang(cloud: np.ndarray, hang: np.ndarray, object_points: np.ndarray
     if solved:
         path = _shortcut(checker, rot, path, settings, np.random.default_rng(seed))
     else:
-        log.info("OmniHang: no path (start/goal invalid or RRT-Connect timed out)")
+        log.info("OmniHang: no path (start/goal invalid or RRT-Connect out of checks)")
         path = np.stack([start, lead])
     positions = resample(np.vstack([path, release]), int(T))[::-1].copy()
     seconds = time.perf_counter() - t0
@@ -304,7 +306,7 @@ def _rrt_connect(checker: CloudClearance, rot: np.ndarray, start: np.ndarray, go
                  bounds: Bounds, s: OmniHangSettings,
                  seed: int) -> np.ndarray | None:
     """RRT-Connect from ``start`` to ``goal`` (keypoint positions); the path's vertices
-    (N, 3) or ``None`` when none is found in ``s.time_limit_s``."""
+    (N, 3) or ``None`` when none is found within ``s.max_checks`` collision checks."""
     import ompl.base as ob
     import ompl.geometric as og
     import ompl.util as ou
@@ -336,7 +338,8 @@ def _rrt_connect(checker: CloudClearance, rot: np.ndarray, start: np.ndarray, go
     planner.setProblemDefinition(pdef)
     with _ompl_log_level(ou.LOG_WARN):
         planner.setup()
-        status = planner.solve(float(s.time_limit_s))
+        budget = checker.n_checks + int(s.max_checks)
+        status = planner.solve(ob.PlannerTerminationCondition(lambda: checker.n_checks >= budget))
     if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
         return None
     path = pdef.getSolutionPath()

@@ -176,8 +176,8 @@ def test_deterministic_per_seed(detour_scene):
     s = OmniHangSettings()
     a = plan_omnihang(cloud, hang, obj, T, s, seed=3).positions
     other = plan_omnihang(cloud, hang, obj, T, s, seed=4).positions
-    b = plan_omnihang(cloud, hang, obj, T, OmniHangSettings(time_limit_s=60.0), seed=3).positions
-    assert np.array_equal(a, b), "same seed, other calls in between, other time limit"
+    b = plan_omnihang(cloud, hang, obj, T, OmniHangSettings(max_checks=10**6), seed=3).positions
+    assert np.array_equal(a, b), "same seed, other calls in between, other check budget"
     assert not np.array_equal(a, other), "the seed reaches the planner"
 
 
@@ -186,7 +186,7 @@ def test_unsolvable_returns_straight_fallback(scene):
     hang = hang_pose(x=0.1)
     # the ring at the hang sits inside a closed shell of points it cannot pass
     cloud = sphere_points(hang[:3, 3] - [0, 0, RING_R - TUBE_R], 0.05)
-    s = OmniHangSettings(time_limit_s=0.3)
+    s = OmniHangSettings(max_checks=3000)
     plan = plan_omnihang(cloud, hang, obj, T, s, seed=0)
     assert not plan.solved
     assert plan.seconds < 5.0
@@ -202,6 +202,22 @@ def test_unsolvable_returns_straight_fallback(scene):
     # resampling may cut the corner at the lead-in point, never more
     length = arc_length(plan.positions)[-1]
     assert np.linalg.norm(goal - start) <= length <= np.linalg.norm(lead - start) + s.lead_in_m
+
+
+def test_the_check_budget_stops_the_search(scene):
+    """RRT-Connect stops when it has spent ``max_checks`` collision checks — a count, so the
+    same on every machine — not earlier and not much later (an iteration's checks overshoot)."""
+    _, obj, _ = scene
+    hang = hang_pose(x=0.1)
+    cloud = sphere_points(hang[:3, 3] - [0, 0, RING_R - TUBE_R], 0.05)  # no way out
+    spent = {}
+    for budget in (2000, 6000):
+        s = OmniHangSettings(max_checks=budget)
+        a, b = (plan_omnihang(cloud, hang, obj, T, s, seed=1) for _ in range(2))
+        assert not a.solved and a.n_checks == b.n_checks, "the stop is deterministic"
+        spent[budget] = a.n_checks
+    rrt = spent[6000] - spent[2000]  # the checks before and after the search cancel
+    assert 4000 <= rrt <= 4000 + 200, spent
 
 
 def test_invalid_start_is_unsolved_not_an_error(scene):
