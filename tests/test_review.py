@@ -1,6 +1,7 @@
 """Recordings made for review: one item at a time on each item timeline, labelled; and, where a
 browser is installed, what Rerun's web viewer actually draws."""
 
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -128,3 +129,71 @@ def test_combined_review_has_each_stage_one_representative_at_a_time(tiny_datase
         values = [next(line for line in text.splitlines() if line.startswith(f"| {field} |"))
                   for text in labels.values()]
         assert len(labels) == kept[stage] and len(set(values)) == len(values), (stage, values)
+
+
+def _pose(t):
+    import rerun as rr
+
+    return rr.Transform3D(translation=t[:3, 3], mat3x3=t[:3, :3])
+
+
+def _rows(rrd: Path) -> Counter:
+    """A recording's rows as a multiset of (entity, times, non-empty component values): what
+    it shows, whatever the chunking and row order within a time."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(rrd)
+    (store,) = reader.recordings()
+    out = Counter()
+    for chunk in reader.stream(store=store).to_chunks():
+        rb = chunk.to_record_batch()
+        cols = {n: rb.column(n).to_pylist() for n in rb.schema.names if n != "rerun.controls.RowId"}
+        for i in range(rb.num_rows):
+            times = tuple((n, cols[n][i]) for n in chunk.timeline_names)
+            vals = tuple(sorted((c, repr(v[i])) for c, v in cols.items()
+                                if c not in chunk.timeline_names and v[i] not in (None, [])))
+            out[chunk.entity_path, times, vals] += 1
+    return out
+
+
+def test_rollout_trace_columns_are_the_per_step_logs(tmp_path):
+    """The trace of a rollout, sent as columns, holds row for row what logging each recorded
+    step (robot links, object, keypoint trail, distance plot) would hold."""
+    import numpy as np
+    import rerun as rr
+    from scipy.spatial.transform import Rotation
+
+    from skt_lib.sim.world import World
+    from viz.rerun_log import log_strip, recording
+    from viz.rollouts import _log_trace, distance_to_path
+
+    rng = np.random.default_rng(0)
+
+    def pose():
+        t = np.eye(4)
+        t[:3, :3] = Rotation.random(random_state=rng).as_matrix()  # not symmetric: order shows
+        t[:3, 3] = rng.normal(size=3)
+        return t
+
+    frames = [{"step": 3 * i, "links": {1: pose(), 4: pose()}, "object": pose()} for i in range(6)]
+    keypoint, skt = pose(), rng.normal(size=(5, 3))
+    n, step, name = 2, 100, "world/trials/02"
+    with recording("test", tmp_path / "columns.rrd", "t") as rec:
+        rec.set_time("trial", sequence=n)
+        _log_trace(rec, name, n, step, frames, [1, 4], keypoint, skt)
+    with recording("test", tmp_path / "steps.rrd", "t") as rec:
+        rec.set_time("trial", sequence=n)
+        trail = []
+        for f in frames:
+            rec.set_time("step", sequence=step + f["step"])
+            for k in (1, 4):
+                t = World.to_support(f["links"][k])
+                rec.log(f"world/robot/link_{k}", _pose(t))
+            t = f["object"]
+            rec.log(f"{name}/object", _pose(t))
+            trail.append((t @ keypoint)[:3, 3])
+            log_strip(rec, f"{name}/keypoint_trail", np.asarray(trail), rgb=(250, 250, 250))
+            rec.log("plots/keypoint_to_skt_mm", rr.Scalars(1000 * distance_to_path(trail[-1], skt)))
+    columns, steps = _rows(tmp_path / "columns.rrd"), _rows(tmp_path / "steps.rrd")
+    assert sum(columns.values()) == 6 * 5
+    assert columns == steps
