@@ -40,7 +40,8 @@ MODEL_OF = {"template_only": "sctdn", "sctdn": "sctdn", "sctdn_cp_feature": "sct
 #: Methods executed by the floating hand; every other method uses the Panda.
 FLOATING = ("oracle_floating",)
 #: Methods whose set-up chooses among the support's stored (ground-truth) SKTs: the first
-#: along which the object sweeps clear and (Panda) a grasp follows
+#: along which the object sweeps clear (else the one it penetrates least) and (Panda) a grasp
+#: follows
 #: (:attr:`~skt_lib.sim.execute.TrialTask.alternatives`).
 FALLS_BACK_TO_STORED = ("oracle", "oracle_floating")
 

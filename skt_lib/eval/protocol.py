@@ -4,9 +4,8 @@ support, one trial per (method, test support, test object), success rates per le
 The cloud each method sees is one rendered view of the support, drawn per support from the
 seed (``item_rng(seed, "sim_eval", support_id)``). The ground truth of a support is its
 first stored SKT (lowest ``skt_index``) resampled to ``T`` waypoints; supports without one
-are left out of every method's rows and counted. The oracle's Panda set-up falls back to the
-support's further stored SKTs, in order, where no grasp follows the first
-(:data:`~skt_lib.eval.methods.FALLS_BACK_TO_STORED`).
+are left out of every method's rows and counted. The oracles' set-up chooses among all the
+support's stored SKTs (:data:`~skt_lib.eval.methods.FALLS_BACK_TO_STORED`).
 """
 
 import time

@@ -221,7 +221,8 @@ def _oracle_target(report: Report, metrics: dict, pairs: pd.DataFrame) -> None:
     report.table(["method (hand)", "level", "trials", "success %", "failures",
                   "ran another stored SKT"], rows)
     report.text("The oracles choose among the support's stored ground-truth SKTs at set-up "
-                "(the first the test object sweeps clear and, for the arm, a grasp can follow; "
+                "(the first the test object sweeps clear, else the one it penetrates least, "
+                "that, for the arm, a grasp can follow; "
                 "docs/evaluation.md); the last column counts the trials that did not run the "
                 "first stored SKT.")
 

@@ -294,15 +294,16 @@ def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, f
     the object at the chosen path's start.
 
     Without alternatives: the task's SKT. With them: the SKTs whose sweep of the object is
-    clear (:data:`SWEEP_TOL_M`) first, then the others, each group in order; the first whose
-    start pose the object does not penetrate and (Panda) that a grasp candidate follows."""
+    clear (:data:`SWEEP_TOL_M`) first, in order, then the others from the shallowest deepest
+    penetration on (ties in order); the first whose start pose the object does not penetrate
+    and (Panda) that a grasp candidate follows."""
     s = task.settings
     inv = invert(keypoint)
     paths = [path, *(executed_path(p, s.step_m, task.object_radius_m) for p in task.alternatives)]
     order = list(range(len(paths)))
     if task.alternatives:
-        clear = [_sweep_clear(world, obj, inv, p, fixed.values()) for p in paths]
-        order = [k for k in order if clear[k]] + [k for k in order if not clear[k]]
+        depth = [_sweep_depth(world, obj, inv, p, fixed.values()) for p in paths]
+        order.sort(key=lambda k: (0.0 if depth[k] <= SWEEP_TOL_M else depth[k], k))
     failures = {}
     for k in order:
         if task.alternatives:  # the sweep moved it; else it still stands where it was loaded
@@ -322,16 +323,15 @@ def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, f
     return 0, paths[0], failures.get(0, next(iter(failures.values())))
 
 
-def _sweep_clear(world: World, obj: int, inv_keypoint: np.ndarray, path: np.ndarray,
-                 bodies) -> bool:
-    """The object placed along ``path`` (keypoint frames) penetrates none of ``bodies`` by
-    more than :data:`SWEEP_TOL_M` (kinematic; at every :data:`SWEEP_EVERY`-th pose and the
-    last)."""
+def _sweep_depth(world: World, obj: int, inv_keypoint: np.ndarray, path: np.ndarray,
+                 bodies) -> float:
+    """The deepest the object, placed along ``path`` (keypoint frames), penetrates any of
+    ``bodies`` (m, ≥ 0; kinematic; at every :data:`SWEEP_EVERY`-th pose and the last)."""
+    deepest = 0.0
     for k in [*range(0, len(path), SWEEP_EVERY), len(path) - 1]:
         world.set_pose_support(obj, path[k] @ inv_keypoint)
-        if any(world.min_distance(obj, b, 0.0) < -SWEEP_TOL_M for b in bodies):
-            return False
-    return True
+        deepest = max(deepest, *(-world.min_distance(obj, b, 0.0) for b in bodies))
+    return deepest
 
 
 #: Physics steps between two checks whether a released object has fallen for good.

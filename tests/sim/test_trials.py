@@ -4,10 +4,13 @@ hand, and a check that an always-succeeding executor would fail these tests."""
 
 import dataclasses
 
+import numpy as np
 import pytest
 
+from skt_lib.geometry.se3 import invert
 from skt_lib.sim import execute
 from skt_lib.sim.execute import REASONS, run_trial
+from skt_lib.sim.world import World
 from tests.sim import scenes
 
 pytestmark = pytest.mark.slow
@@ -169,3 +172,25 @@ def test_set_up_prefers_an_alternative_the_object_sweeps_clear(scene, hand):
     out = run_trial(task)
     assert out["row"]["success"] and out["skt"] == 1, out["row"]
     assert out["row"]["grasp"].startswith("skt1/")
+
+
+@pytest.mark.parametrize("hand", ["panda", "floating"])
+def test_with_no_clear_alternative_set_up_runs_the_shallowest(scene, hand):
+    """Where the object sweeps clear along none of the stored SKTs, set-up runs the one it
+    penetrates least, not the first in order."""
+    deep, shallow = (scenes.straight_skt(offset=(0.0, 0.0, dz)) for dz in (-0.012, -0.006))
+    world_depth = {}
+    for name, positions in (("deep", deep), ("shallow", shallow)):
+        task = scenes.ring_task(*scene, positions, hand)
+        with World(task.settings.dt, task.settings.solver_iterations) as world:
+            world.add_wall()
+            sup = world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5)
+            kp = np.asarray(task.keypoint).reshape(4, 4)
+            path = execute.executed_path(task.positions, task.settings.step_m, task.object_radius_m)
+            obj = world.load(task.object_urdf, path[0] @ invert(kp), fixed=False, friction=0.5)
+            world_depth[name] = execute._sweep_depth(world, obj, invert(kp), path, [sup])
+    assert world_depth["deep"] > world_depth["shallow"] > execute.SWEEP_TOL_M, world_depth
+    as_tuple = lambda p: tuple(map(tuple, p))  # noqa: E731
+    task = dataclasses.replace(scenes.ring_task(*scene, deep, hand),
+                               alternatives=(as_tuple(deep), as_tuple(shallow)))
+    assert run_trial(task)["skt"] == 2
