@@ -300,22 +300,36 @@ def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, f
     s = task.settings
     inv = invert(keypoint)
     paths = [path, *(executed_path(p, s.step_m, task.object_radius_m) for p in task.alternatives)]
-    order = list(range(len(paths)))
-    if task.alternatives:
-        depth = [_sweep_depth(world, obj, inv, p, fixed.values()) for p in paths]
-        order.sort(key=lambda k: (0.0 if depth[k] <= SWEEP_TOL_M else depth[k], k))
+    bodies = list(fixed.values())
     failures = {}
-    for k in order:
-        if task.alternatives:  # the sweep moved it; else it still stands where it was loaded
+
+    def attempt(k: int):
+        if task.alternatives:  # a sweep moved it; else it still stands where it was loaded
             world.set_pose_support(obj, paths[k][0] @ inv)
         if _blockers(world, {"object": obj}, fixed, start=True):
-            continue
+            return None
         if setup is None:
             return k, paths[k], True
         choice = setup(paths[k])
         if not isinstance(choice, GraspFailure):
             return k, paths[k], choice
         failures[k] = choice
+        return None
+
+    # swept lazily, in the order the docstring gives: a clear SKT is tried as soon as its
+    # sweep is known clear; the others are swept to their deepest only when none was taken
+    penetrating = []
+    for k in range(len(paths)):
+        if task.alternatives and _sweep_depth(world, obj, inv, paths[k], bodies,
+                                              stop_above=SWEEP_TOL_M) > SWEEP_TOL_M:
+            penetrating.append(k)
+            continue
+        if (out := attempt(k)) is not None:
+            return out
+    depth = {k: _sweep_depth(world, obj, inv, paths[k], bodies) for k in penetrating}
+    for k in sorted(penetrating, key=lambda k: (depth[k], k)):
+        if (out := attempt(k)) is not None:
+            return out
     if not failures:
         if task.alternatives:  # back at the task's own start, for the blockers the row names
             world.set_pose_support(obj, paths[0][0] @ inv)
@@ -324,13 +338,16 @@ def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, f
 
 
 def _sweep_depth(world: World, obj: int, inv_keypoint: np.ndarray, path: np.ndarray,
-                 bodies) -> float:
+                 bodies, stop_above: float = np.inf) -> float:
     """The deepest the object, placed along ``path`` (keypoint frames), penetrates any of
-    ``bodies`` (m, ≥ 0; kinematic; at every :data:`SWEEP_EVERY`-th pose and the last)."""
+    ``bodies`` (m, ≥ 0; kinematic; at every :data:`SWEEP_EVERY`-th pose and the last); or,
+    as soon as a pose goes deeper than ``stop_above``, that pose's depth."""
     deepest = 0.0
     for k in [*range(0, len(path), SWEEP_EVERY), len(path) - 1]:
         world.set_pose_support(obj, path[k] @ inv_keypoint)
         deepest = max(deepest, *(-world.min_distance(obj, b, 0.0) for b in bodies))
+        if deepest > stop_above:
+            break
     return deepest
 
 
