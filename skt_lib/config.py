@@ -136,6 +136,9 @@ class RotationExtractionParams(_Section):
 
 class RrtSktsParams(_Section):
     n_skts_per_support: int = Field(ge=1, le=500, description="Planned SKTs per support (paper: 50).")
+    n_skts_per_test_support: int = Field(
+        ge=1, le=500, description="Planned SKTs per test support: the oracles' stored choices in "
+        "sim_eval (≥ n_skts_per_support; the first ones are the same).")
     start_dx_m: tuple[float, float] = Field(description="Start keypoint offset range toward the robot.")
     start_dy_m: float = Field(ge=0.0, le=0.3, description="Start keypoint offset half-range along the wall.")
     start_dz_m: tuple[float, float] = Field(description="Start keypoint offset range upward.")
@@ -166,6 +169,8 @@ class RrtSktsParams(_Section):
             raise ValueError("surface_bias: goal_bias + surface_bias must be < 1")
         if self.dense_step_m > self.step_m:
             raise ValueError("dense_step_m: must not exceed step_m")
+        if self.n_skts_per_test_support < self.n_skts_per_support:
+            raise ValueError("n_skts_per_test_support: must be at least n_skts_per_support")
         return self
 
 

@@ -64,7 +64,8 @@ def write_report(rep: Path, params, metrics: dict, results: list[dict], supports
     p, level = params.rrt_skts, supports["difficulty"]
     report = Report("rrt_skts", rep)
     report.text(f"{metrics['n_skts']} SKTs on {metrics['n_supports_with_skts']}/{metrics['n_supports']} supports "
-                f"({metrics['n_attempted']} attempted, {p.n_skts_per_support} per support) on "
+                f"({metrics['n_attempted']} attempted: {p.n_skts_per_support} per support, "
+                f"{p.n_skts_per_test_support} per test support) on "
                 f"{params.compute.n_workers} worker(s). Every stored SKT ends at the hang: ξ_0 within "
                 f"{REACH_TOL_M * 1000:.0f} mm of the reference's hanging keypoint (median "
                 f"{1000 * (metrics['xi0_error_median_m'] or 0):.1f} mm, max "

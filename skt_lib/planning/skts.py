@@ -150,6 +150,13 @@ def sweep_clearance(checker: MeshClearance, frames: np.ndarray, keypoint: np.nda
     return checker.clearance(frames @ invert(keypoint))
 
 
+def n_attempts(p: RrtSktsParams, split: str) -> int:
+    """SKTs planned for a support of ``split``: more for test supports, whose stored SKTs are
+    the oracle's choices in ``sim_eval`` (the support's generator draws them in order, so the
+    first ``n_skts_per_support`` are the ones any split would get)."""
+    return p.n_skts_per_test_support if split == "test" else p.n_skts_per_support
+
+
 def plan_support_skts(task: SktTask) -> dict:
     """All SKTs of one support (its own generator and PyBullet client)."""
     p = task.params
@@ -184,7 +191,7 @@ def plan_support_skts(task: SktTask) -> dict:
         sup = world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5)
         probe = add_probe(world, [ProbeObject(o.collision, o.keypoint) for o in probe_objs])
         collides = make_probe_collision_fn(world, probe, [sup, wall], p.clearance_m, p.penetration_tol_m)
-        for index in range(p.n_skts_per_support):
+        for index in range(n_attempts(p, task.split)):
             t0 = time.perf_counter()
             try:
                 path, n_checks = plan_threading(goal, in_start, sample_start, lower, upper, collides,
@@ -217,4 +224,4 @@ def plan_support_skts(task: SktTask) -> dict:
                 MeshClearance(support_mesh, mesh, p.recheck_spacing_m), frames, kp)})
     return {"support_id": task.support_id, "skts": skts, "failures": dict(failures),
             "plan_s": plan_s, "recheck_s": recheck_s, "n_planned": n_planned,
-            "n_recheck_ok": n_recheck_ok, "n_attempted": p.n_skts_per_support, "test_sweeps": sweeps}
+            "n_recheck_ok": n_recheck_ok, "n_attempted": n_attempts(p, task.split), "test_sweeps": sweeps}

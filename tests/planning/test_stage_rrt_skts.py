@@ -1,5 +1,6 @@
 """rrt_skts on the tiny dataset: contract, release near the hang, SKTs clear as executed."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -10,7 +11,7 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import invert, pose_matrix
 from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
-from skt_lib.planning.skts import REACH_TOL_M
+from skt_lib.planning.skts import REACH_TOL_M, load_skt_tasks, plan_support_skts
 from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 
@@ -58,3 +59,24 @@ def test_contract_goal_and_recheck_as_executed(tiny_dataset):
         assert poses[0] == pytest.approx((frames @ invert(k))[-1], abs=1e-9)
         # starts in front of the hang
         assert keypoints[-1][0] > goal[0, 3] + p.rrt_skts.start_dx_m[0] - 1e-9
+
+
+def test_test_supports_get_more_skts_with_the_same_first_ones(tiny_dataset):
+    """A test support plans ``n_skts_per_test_support`` SKTs (the oracle's choices), other
+    supports ``n_skts_per_support``; the support's generator draws them in order, so the
+    first SKT is the same whichever count a split gets."""
+    params, data, _ = tiny_dataset
+    p = load_params(params)
+    task = load_skt_tasks(data, p.common.seed, p.rrt_skts, p.clustering.T)[0]
+
+    def plan(split: str, n_test: int) -> dict:
+        rp = p.rrt_skts.model_copy(update={"n_skts_per_support": 1,
+                                           "n_skts_per_test_support": n_test})
+        return plan_support_skts(dataclasses.replace(task, split=split, params=rp, test_objects=()))
+
+    one, train, test = plan("test", 1), plan("train", 3), plan("test", 3)
+    assert one["n_attempted"] == train["n_attempted"] == 1
+    assert test["n_attempted"] == 3 and len(test["plan_s"]) == 3
+    assert one["skts"], "the tiny support should get an SKT"
+    np.testing.assert_array_equal(test["skts"][0]["keypoints"], one["skts"][0]["keypoints"])
+    np.testing.assert_array_equal(train["skts"][0]["keypoints"], one["skts"][0]["keypoints"])
