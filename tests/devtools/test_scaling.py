@@ -4,6 +4,7 @@ import json
 import sys
 
 import pytest
+import yaml
 
 from tools import scaling
 
@@ -71,7 +72,8 @@ def test_extrapolation_and_tables():
     assert "fresh clone" not in summary
     data["fresh_repro"] = {"commit": "def", "wall_s": 1700.0, "setup_s": 90.0, "stages": {},
                            "git_status_clean": True}
-    assert ("| embedded default, fresh clone + `make repro` (set-up included) | 120 | 480 | "
+    planned = scaling.skts_planned(yaml.safe_load((scaling.ROOT / "params.yaml").read_text()))
+    assert (f"| embedded default, fresh clone + `make repro` (set-up included) | 120 | {planned} | "
             "28.3 min (measured at def) |") in scaling.presets_summary(data)
     assert f"≈ {sum(paper.values()) / 3600:.1f} h (**extrapolated**; `rrt_skts`" in summary
     assert scaling.table({"runs": []}).startswith("Not measured")
@@ -105,3 +107,11 @@ def test_fresh_clones_and_runs_make_repro_with_set_up_timed(tmp_path, monkeypatc
     assert f"commit {f['commit']}" in text and "`toy`" in text and "**not** clean" in text
     assert f["git_status"] == ["?? untracked.txt"] and "(`untracked.txt`)" in text
     assert scaling.fresh_summary({}).startswith("Not measured")
+
+
+def test_skts_planned_counts_test_supports_at_their_own_rate():
+    params = {"rrt_skts": {"n_skts_per_support": 4, "n_skts_per_test_support": 8},
+              "mesh_gen": {"n_supports": 120, "n_test_per_level": 5}}
+    assert scaling.skts_planned(params) == 100 * 4 + 20 * 8
+    del params["rrt_skts"]["n_skts_per_test_support"]  # params from before the split count
+    assert scaling.skts_planned(params) == 120 * 4
