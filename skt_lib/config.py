@@ -153,6 +153,7 @@ class RrtSktsParams(_Section):
     goal_bias: float = Field(gt=0.0, lt=1.0, description="Share of tree samples drawn in the start region.")
     surface_bias: float = Field(ge=0.0, lt=1.0, description="Share of tree samples drawn near the support's surface.")
     surface_offset_m: float = Field(gt=0.0, le=0.05, description="Largest offset of those samples from the surface, along its normal.")
+    plane_bias: float = Field(ge=0.0, le=1.0, description="Share of tree samples (of every kind) moved onto the threading plane: the vertical plane through the hang that holds the hanging keypoint's x axis.")
     max_checks: int = Field(ge=100, le=10_000_000, description="Planning budget per SKT, in pose checks.")
     shortcut_steps: int = Field(ge=0, le=100000, description="Shortcut attempts on a found path.")
     dense_step_m: float = Field(gt=0.0, le=0.001, description="Spacing of stored keypoint positions (≤ 1 mm).")

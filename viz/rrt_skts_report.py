@@ -80,18 +80,22 @@ def write_report(rep: Path, params, metrics: dict, results: list[dict], supports
                 f"along the hanging keypoint's x, release lifted ≤ {p.max_lift_m * 1000:.0f} mm where the "
                 f"reference does not fit at the hang; samples: {p.goal_bias:.0%} start region, "
                 f"{p.surface_bias:.0%} within {p.surface_offset_m * 1000:.0f} mm of the support's "
-                "surface, the rest uniform).")
+                f"surface, the rest uniform; {p.plane_bias:.0%} of them moved onto the vertical plane "
+                "through the hang that holds the arrival direction).")
     report.table(["level", "attempted", "reach the hang", "rate"],
                  [[lv, attempted_by_level[lv], reached[lv],
                    f"{metrics['reaches_hang_rate_by_level'][lv]:.3f}"] for lv in LEVELS])
-    report.heading("Test objects along the oracle SKTs")
-    report.text(f"Each test support's first SKT (the oracle of sim_eval) swept with every *test* "
-                f"object at its own keypoint, as executed: {metrics['test_sweep_n_pairs']} pairs, "
+    report.heading("Test objects along each test support's first SKT")
+    report.text(f"Each test support's first SKT swept with every *test* object at its own keypoint, "
+                f"as executed: {metrics['test_sweep_n_pairs']} pairs, "
                 f"clear (penetration ≤ {sweep_tol_m * 1000:.0f} mm) "
                 f"{100 * (metrics['test_sweep_clear_rate'] or 0):.1f} %, median clearance "
                 f"{metrics['test_sweep_clearance_mm_median'] or 0:.1f} mm (capped at 6 mm). Test objects "
                 "take no part in planning" + (" ; training objects did (probe)." if p.probe_train_objects
-                                             else "; training objects did not either (see README)."))
+                                             else "; training objects did not either (see README).")
+                + f" The oracles of sim_eval choose among all {p.n_skts_per_test_support} SKTs planned "
+                "for a test support, those whose sweep of the object is clear first (docs/evaluation.md); "
+                "this figure is the first SKT's alone.")
     if sweeps:
         histogram([1000 * c for c in sweeps], report.figure("test_sweeps.png", "Test-object sweep "
                   "clearance along oracle SKTs (mm, < 0: penetration)"), "clearance", "mm")

@@ -111,7 +111,7 @@ def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams, T: int) -> list[SktT
 def thread_settings(p: RrtSktsParams, probe_radius: float, T: int) -> ThreadSettings:
     return ThreadSettings(p.step_m, p.max_turn_deg, p.lead_in_m, p.max_lift_m, p.check_step_m,
                           probe_radius, p.goal_bias, p.surface_bias, p.max_checks,
-                          p.shortcut_steps, T)
+                          p.shortcut_steps, T, p.plane_bias)
 
 
 def surface_sampler(mesh, max_offset_m: float):

@@ -25,7 +25,12 @@ give it:
 - samples are drawn in the start region (``goal_bias``), near the support's surface
   (``surface_bias``, from the caller's ``sample_near``: points offset from the mesh along its
   normals, so the tree follows hooks and tips of any shape, imported meshes included), or
-  uniformly in the bounds;
+  uniformly in the bounds; a ``plane_bias`` share of them, of every kind, is moved onto the
+  *threading plane* (:func:`threading_plane`: the vertical plane through the hang that holds
+  the arrival direction), where a ring goes over a tip and down it without turning sideways.
+  A path that leaves that plane to pass a tip beside it turns the object about the vertical
+  and, through the transported frames, rolls it: its start orientation ends up far from the
+  hanging one (up to 180°), which the arm cannot follow and a learned template cannot average;
 - when a node reaches the start region, the path is joined straight to the canonical
   start (when given: the region's centre) from the first of its vertices where that stretch
   keeps the turn limit and is clear, so SKTs of one support start at one point and differ only where the support makes
@@ -71,6 +76,7 @@ class ThreadSettings:
     max_checks: int  # budget, in pose checks
     shortcut_steps: int  # shortcut attempts on the found path
     T: int  # waypoints the SKT is executed with (resampled)
+    plane_bias: float = 0.0  # share of tree samples moved onto the threading plane
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -210,7 +216,8 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
     surface (drawn with ``surface_bias``). Raises :class:`ThreadingFailed`."""
     turn = np.radians(s.max_turn_deg)
     check = _Checker(collides, s)
-    sampler = _Sampler(sample_start, sample_near, lower, upper, s)
+    sampler = _Sampler(sample_start, sample_near, lower, upper, s,
+                       threading_plane(goal) if s.plane_bias > 0 else None)
     n_rejected = 0
     for lead, a0, r0 in _releases(goal[:3, 3], _unit(goal[:3, 0]), check, s):
         while True:  # fresh trees from this release until one survives resampling (one budget)
@@ -248,14 +255,33 @@ class _Sampler:
     lower: np.ndarray
     upper: np.ndarray
     s: ThreadSettings
+    plane: tuple[np.ndarray, np.ndarray] | None = None  # (point, unit normal)
 
     def __call__(self, rng: np.random.Generator) -> np.ndarray:
+        q = self._draw(rng)
+        if self.plane is not None and rng.random() < self.s.plane_bias:
+            point, normal = self.plane
+            q = q - float(np.dot(q - point, normal)) * normal
+        return q
+
+    def _draw(self, rng: np.random.Generator) -> np.ndarray:
         u = rng.random()
         if u < self.s.goal_bias:
             return self.sample_start(rng)
         if self.sample_near is not None and u < self.s.goal_bias + self.s.surface_bias:
             return self.sample_near(rng)
         return rng.uniform(self.lower, self.upper)
+
+
+def threading_plane(goal: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(point, unit normal)`` of the vertical plane through the hanging keypoint ``goal``
+    (4×4, support frame, z up) that holds its x axis (the arrival direction); ``None`` when
+    that axis is vertical (no such plane is defined)."""
+    normal = np.cross(goal[:3, 0], [0.0, 0.0, 1.0])
+    length = float(np.linalg.norm(normal))
+    if length < 1e-6:
+        return None
+    return np.array(goal[:3, 3], float), normal / length
 
 
 def _grow(lead: np.ndarray, a0: np.ndarray, r0: np.ndarray, in_start, sampler: _Sampler,
