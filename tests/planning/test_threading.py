@@ -156,16 +156,15 @@ def _sampler(bias: float, plane) -> _Sampler:
 
 def test_plane_bias_moves_its_share_of_samples_onto_the_plane_and_nothing_else():
     plane = (np.array([0.05, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
-    draws = {b: np.array([_sampler(b, plane)(rng) for rng in [np.random.default_rng(7)]
-                          for _ in range(2000)]) for b in (0.0, 0.5, 1.0)}
-    on_plane = {b: np.mean(np.abs(d[:, 1]) < 1e-12) for b, d in draws.items()}
+
+    def draws(bias: float) -> np.ndarray:
+        sampler, rng = _sampler(bias, plane), np.random.default_rng(7)
+        return np.array([sampler(rng) for _ in range(2000)])
+
+    on_plane = {b: np.mean(np.abs(draws(b)[:, 1]) < 1e-12) for b in (0.0, 0.5, 1.0)}
     assert on_plane[1.0] == 1.0 and on_plane[0.0] == 0.0
     assert 0.45 < on_plane[0.5] < 0.55
-    assert np.array_equal(draws[1.0][:, [0, 2]] != 0, np.ones((2000, 2), bool))  # only y moves
-    # no plane (bias 0 or a vertical arrival): exactly the draws of the plain sampler
-    plain = _Sampler(**{**_sampler(0.0, None).__dict__})
-    rng_a, rng_b = np.random.default_rng(3), np.random.default_rng(3)
-    assert all(np.array_equal(plain(rng_a), _sampler(0.7, None)(rng_b)) for _ in range(50))
+    assert np.all(draws(1.0)[:, [0, 2]] != 0)  # only the coordinate along the normal moves
 
 
 def test_with_full_plane_bias_the_path_stays_in_the_threading_plane(tmp_path):
@@ -182,7 +181,8 @@ def test_with_full_plane_bias_the_path_stays_in_the_threading_plane(tmp_path):
         off_plane[bias] = np.abs(path[:, 1]).max()  # the plane: y = 0 (arrival along −x)
         frames = executed_path(resample(path, wide.T), 0.001, 0.06)
         assert MeshClearance(support, ring_mesh, 0.002).clearance(frames @ invert(k)) > 0
-    assert off_plane[1.0] < 1e-9 < 1e-3 < off_plane[0.0]
+    assert off_plane[1.0] < 1e-9
+    assert off_plane[0.0] > 1e-3
 
 
 def test_tree_frames_are_the_skt_frames_of_the_chain():
