@@ -20,8 +20,9 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.io import read_table
 from skt_lib.learning.data import load_training_set
 from skt_lib.learning.predictor import SktPredictor
-from skt_lib.learning.train import from_params, predict_items, summarise, train_sctdn
+from skt_lib.learning.train import from_params, intervals, predict_items, summarise, train_sctdn
 from skt_lib.schemas import SUPPORTS
+from skt_lib.seeding import item_rng
 from stages._common import parse_args
 from viz.figures import Panel, curves, mesh_gallery
 from viz.report import Report, write_metrics, write_run_log
@@ -64,9 +65,13 @@ def main(argv=None) -> int:
         for _ in range(5):
             predictor.predict(sample)
     profile = prof.key_averages().table(sort_by="cpu_time_total", row_limit=12)
+    items = [(s, int(v)) for s in val for v in p.val_views]
+    per = predict_items(model, items)
+    ci = intervals(per, [s.support_id for s, _ in items],
+                   item_rng(params.common.seed, "train", "val_bootstrap"))
     curve = [h["val_traj_l2_mm"] for h in history]
     last5 = float(np.mean(curve[-5:]))
-    metrics = {**best, "n_train_supports": len(train), "n_val_supports": len(val),
+    metrics = {**best, **ci, "n_train_supports": len(train), "n_val_supports": len(val),
                "epochs": p.epochs,
                "best_epoch": int(np.argmin(curve)), "val_traj_l2_mm_last5_mean": last5,
                # settled: the chosen epoch is not a lucky dip of a still-swinging curve
@@ -79,8 +84,12 @@ def main(argv=None) -> int:
                 "threads (wall-clock times, the inference time and its torch.profiler breakdown: "
                 f"the git-ignored run log `logs/train.json`); best epoch chosen on {len(val)} "
                 f"validation supports × views {list(p.val_views)}.")
-    report.table(["metric (best epoch)", "value", "unit"],
-                 [[k2, v, _unit(k2)] for k2, v in best.items()])
+    report.table(["metric (best epoch)", "value", "95 % interval", "unit"],
+                 [[k2, v, _interval(ci.get(f"{k2}_ci95")), _unit(k2)] for k2, v in best.items()])
+    report.text(f"Intervals: Wilson over the {len(items)} (support, view) pairs for the two rates "
+                f"(it counts views as independent; they are not quite: {len(p.val_views)} views "
+                f"of each support), a bootstrap over the {len(val)} supports (2000 resamples of "
+                "whole supports) for the mean errors.")
     report.text("`train_*` are the training losses, averaged over the epoch: `train_traj` is the "
                 "mean waypoint distance in *normalised cloud units* (cloud max radius = 1), not "
                 "mm; compare training and validation on the curves, not across units.")
@@ -90,7 +99,7 @@ def main(argv=None) -> int:
     curves(history, ["train_loss", "train_traj", "train_aff", "train_cls"],
            report.figure("train_loss.png", "Training losses (normalised cloud units, not mm)"),
            "training", "loss (normalised units)")
-    _breakdown(report, model, val, p.val_views, root)
+    _breakdown(report, items, per, root)
     report.text("Curves: `dvc plots show` (reports/train/live/plots/metrics); inference speed: "
                 "`make bench` (reports/bench/bench.json).")
     report.write()
@@ -101,11 +110,10 @@ def main(argv=None) -> int:
     return 0
 
 
-def _breakdown(report: Report, model, val, views, root: Path) -> None:
-    """Validation figures per family and per level (best model), and one validation support
-    per family drawn with its ground truth, the aligned template and the prediction."""
-    items = [(s, int(v)) for s in val for v in views]
-    per = predict_items(model, items)
+def _breakdown(report: Report, items, per: dict, root: Path) -> None:
+    """Validation figures per family and per level (best model's predictions ``per`` on the
+    (support, view) ``items``), and one validation support per family drawn with its ground
+    truth, the aligned template and the prediction."""
     rows = []
     for key, name in ((lambda s: f"family {s.family}", "family"), (lambda s: s.level, "level")):
         groups = sorted({key(s) for s, _ in items})
@@ -133,6 +141,11 @@ def _breakdown(report: Report, model, val, views, root: Path) -> None:
     mesh_gallery(panels, report.figure("val_predictions.png", "One validation support per family: "
                  "ground-truth SKTs (grey), aligned template (orange), SCTDN prediction (blue); red: "
                  "predicted and true contact"))
+
+
+def _interval(ci) -> str:
+    """``[lo, hi]`` for the report table; a dash where the metric has no interval."""
+    return "–" if ci is None else f"[{ci[0]:.3g}, {ci[1]:.3g}]"
 
 
 def _unit(metric: str) -> str:

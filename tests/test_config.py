@@ -12,6 +12,7 @@ def test_committed_params_load():
     p = load_params(ROOT / "params.yaml")
     assert p.mesh_gen.n_supports >= 100
     assert p.mesh_gen.n_test_per_level >= 5
+    assert p.mesh_gen.n_val_per_level >= 10  # selection on >= 40 supports, not on noise
 
 
 def test_negative_count_names_the_key(tiny_dict, write_params):

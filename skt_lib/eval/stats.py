@@ -1,4 +1,5 @@
-"""Error bars for success rates: Wilson intervals and exact paired (McNemar) comparisons.
+"""Error bars: Wilson intervals for rates, exact paired (McNemar) comparisons, and a cluster
+bootstrap for means over items grouped by support.
 
 Trials are Bernoulli outcomes. A rate gets a Wilson score interval (better than the normal
 approximation at the extremes and at small ``n``, where Table I lives). Two methods run on
@@ -35,6 +36,30 @@ def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, fl
     lo = 0.0 if k == 0 else max(0.0, centre - half)
     hi = 1.0 if k == n else min(1.0, centre + half)
     return lo, hi
+
+
+def bootstrap_mean_interval(values, groups, rng: np.random.Generator, n_boot: int = 2000,
+                            confidence: float = 0.95) -> tuple[float, float] | None:
+    """Percentile interval ``(lo, hi)`` of the mean of ``values (n,)`` under a cluster bootstrap:
+    each resample draws whole groups (e.g. supports, whose views are not independent) with
+    replacement and averages every value of the drawn groups. ``None`` when there are no values."""
+    values, groups = np.asarray(values, np.float64), np.asarray(groups)
+    if values.ndim != 1 or groups.shape != values.shape:
+        raise ValueError(f"values, groups: need two 1-D arrays of one length, got shapes "
+                         f"{values.shape} and {groups.shape}")
+    if not np.isfinite(values).all():
+        raise ValueError("values: must be finite")
+    if n_boot < 1 or not 0.0 < confidence < 1.0:
+        raise ValueError(f"n_boot >= 1 and confidence in (0, 1) needed, got {n_boot}, {confidence}")
+    if len(values) == 0:
+        return None
+    _, inverse = np.unique(groups, return_inverse=True)
+    sums, counts = np.bincount(inverse, values), np.bincount(inverse)
+    draws = rng.integers(0, len(sums), size=(n_boot, len(sums)))
+    means = sums[draws].sum(1) / counts[draws].sum(1)
+    tail = 50 * (1 - confidence)
+    lo, hi = np.percentile(means, [tail, 100 - tail])
+    return float(lo), float(hi)
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from skt_lib.eval.stats import bootstrap_mean_interval, wilson_interval
 from skt_lib.learning.data import SupportData, normalise
 from skt_lib.learning.pointnet2 import geometry_memo
 from skt_lib.learning.sctdn import Sctdn, SctdnConfig, sctdn_loss, traj_distance
@@ -105,6 +106,27 @@ def summarise(per_item: dict) -> dict:
             "val_cls_acc": float(per_item["cls_ok"].mean()),
             # None (JSON null) when no view shows the contact: no rate to report
             "val_contact_within_1cm_rate": float(within.mean()) if visible.any() else None}
+
+
+def intervals(per_item: dict, support_ids, rng: np.random.Generator) -> dict:
+    """95 % intervals of :func:`summarise`'s figures, as ``<metric>_ci95: [lo, hi]`` (or
+    ``None`` where the metric has no items): Wilson over the (support, view) items for the two
+    rates, a bootstrap over supports for the mean errors (a support's views are not
+    independent: whole supports are resampled). ``support_ids (n,)`` names each item's
+    support."""
+    support_ids = np.asarray(support_ids)
+    visible = per_item["contact_visible"]
+    within = per_item["contact_err_m"][visible] <= CONTACT_OK_M
+    out = {}
+    for name, flags in (("val_cls_acc", per_item["cls_ok"] > 0.5),
+                        ("val_contact_within_1cm_rate", within)):
+        ci = wilson_interval(int(flags.sum()), len(flags))
+        out[f"{name}_ci95"] = None if ci is None else list(ci)
+    for name, key in (("val_traj_l2_mm", "traj_mm"), ("val_template_only_l2_mm", "template_mm"),
+                      ("val_affordance_mse", "aff_mse")):
+        ci = bootstrap_mean_interval(per_item[key], support_ids, rng)
+        out[f"{name}_ci95"] = None if ci is None else list(ci)
+    return out
 
 
 def evaluate(model: Sctdn, supports: list[SupportData], views, batch_size: int = 16) -> dict:

@@ -1,11 +1,12 @@
-"""Wilson intervals and the exact paired (McNemar) test against hand-computed values."""
+"""Wilson intervals and the exact paired (McNemar) test against hand-computed values; the
+cluster bootstrap over supports."""
 
 import numpy as np
 import pytest
 
 from skt_lib.eval.stats import (
-    A_BETTER, B_BETTER, NO_DIFFERENCE, mcnemar_exact_p, paired_comparison, paired_comparisons,
-    success_ci95, wilson_interval,
+    A_BETTER, B_BETTER, NO_DIFFERENCE, bootstrap_mean_interval, mcnemar_exact_p,
+    paired_comparison, paired_comparisons, success_ci95, wilson_interval,
 )
 
 Z2 = 1.959963984540054 ** 2  # z_{0.975}^2
@@ -123,3 +124,31 @@ def pd_concat(a, b):
     import pandas as pd
 
     return pd.concat([a, b], ignore_index=True)
+
+
+def test_bootstrap_resamples_whole_supports():
+    """Five identical views per support carry no more information than one: the cluster
+    bootstrap gives the same interval for both (an item bootstrap would narrow by ~√5)."""
+    per_support = np.random.default_rng(0).normal(10.0, 3.0, 40)
+    one = bootstrap_mean_interval(per_support, np.arange(40), np.random.default_rng(1))
+    five = bootstrap_mean_interval(np.repeat(per_support, 5), np.repeat(np.arange(40), 5),
+                                   np.random.default_rng(1))
+    assert one == pytest.approx(five, abs=1e-12)
+    lo, hi = one
+    se = per_support.std(ddof=1) / np.sqrt(40)
+    assert lo < per_support.mean() < hi
+    assert hi - lo == pytest.approx(2 * 1.96 * se, rel=0.15)
+
+
+def test_bootstrap_weights_supports_by_their_views_and_checks_input():
+    # a constant gives a point interval; unequal view counts weigh each item, not each support
+    assert bootstrap_mean_interval([2.0, 2.0, 2.0], ["a", "a", "b"],
+                                   np.random.default_rng(0)) == (2.0, 2.0)
+    lo, hi = bootstrap_mean_interval([0.0, 0.0, 0.0, 3.0], ["a", "a", "a", "b"],
+                                     np.random.default_rng(0), n_boot=4000)
+    assert (lo, hi) == (0.0, 3.0)  # resamples: aa -> 0, bb -> 3, ab -> 0.75
+    assert bootstrap_mean_interval([], [], np.random.default_rng(0)) is None
+    with pytest.raises(ValueError, match="values, groups"):
+        bootstrap_mean_interval([1.0, 2.0], ["a"], np.random.default_rng(0))
+    with pytest.raises(ValueError, match="finite"):
+        bootstrap_mean_interval([1.0, np.nan], ["a", "b"], np.random.default_rng(0))

@@ -162,3 +162,22 @@ def test_contact_rate_counts_only_views_where_the_contact_is_seen():
     assert summarise(per)["val_contact_within_1cm_rate"] == pytest.approx(2 / 3)  # 1 cm counts
     per["contact_visible"][:] = False
     assert summarise(per)["val_contact_within_1cm_rate"] is None
+
+
+def test_validation_intervals_wilson_for_rates_bootstrap_over_supports_for_errors():
+    from skt_lib.eval.stats import wilson_interval
+    from skt_lib.learning.train import intervals
+
+    per = {"traj_mm": np.array([1.0, 3.0, 10.0, 12.0]), "template_mm": np.full(4, 5.0),
+           "aff_mse": np.zeros(4), "cls_ok": np.array([1.0, 0.0, 1.0, 1.0]),
+           "contact_err_m": np.array([0.005, 0.02, 0.5, 0.01]),
+           "contact_visible": np.array([True, True, False, True])}
+    ci = intervals(per, ["a", "a", "b", "b"], np.random.default_rng(0))
+    assert ci["val_cls_acc_ci95"] == pytest.approx(list(wilson_interval(3, 4)))
+    assert ci["val_contact_within_1cm_rate_ci95"] == pytest.approx(list(wilson_interval(2, 3)))
+    # two supports with means 2 and 11: resamples give 2, 6.5 or 11
+    assert ci["val_traj_l2_mm_ci95"] == pytest.approx([2.0, 11.0])
+    assert ci["val_template_only_l2_mm_ci95"] == pytest.approx([5.0, 5.0])
+    per["contact_visible"][:] = False
+    assert intervals(per, ["a", "a", "b", "b"], np.random.default_rng(0))[
+        "val_contact_within_1cm_rate_ci95"] is None

@@ -17,6 +17,8 @@ def test_train_contract_and_predictor(tiny_dataset):
     m = json.loads((reports / "train" / "metrics.json").read_text())
     for key in ("val_traj_l2_mm", "val_template_only_l2_mm", "val_affordance_mse", "val_cls_acc"):
         assert np.isfinite(m[key])
+        lo, hi = m[f"{key}_ci95"]  # the best epoch's figure lies in its interval
+        assert lo <= m[key] <= hi
     assert (reports / "train" / "live" / "plots" / "metrics").is_dir()
     pred = SktPredictor.load(data / "train")
     cloud = read_npz(next((data / "render_views").glob("*.npz")), RENDER_SPEC)["points"][3]
