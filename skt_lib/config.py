@@ -145,13 +145,15 @@ class RrtSktsParams(_Section):
     step_m: float = Field(gt=0.001, le=0.05, description="Tree edge length of the threading planner.")
     max_turn_deg: float = Field(gt=0.0, le=90.0, description="Largest turn of the motion direction per edge.")
     lead_in_m: float = Field(gt=0.0, le=0.1, description="Straight final approach along the hanging keypoint's x.")
-    max_lift_m: float = Field(ge=0.0, le=0.004, description="How far above the hang ξ_0 may be lifted (the object drops in); ≤ 4 mm, so every SKT ends within 5 mm of the hang.")
+    max_release_offset_m: float = Field(ge=0.0, le=0.004, description="How far from the hang ξ_0 may be, lifted above it and/or moved back along the arrival (the object drops or slides in); ≤ 4 mm, so every SKT ends within 5 mm of the hang.")
     check_step_m: float = Field(gt=0.0, le=0.01, description="Largest probe-point motion between checked poses.")
     clearance_m: float = Field(ge=0.0, le=0.01, description="PyBullet distance the reference object keeps from support and wall.")
     probe_train_objects: bool = Field(description="Plan with the training objects beside the reference (see README).")
     penetration_tol_m: float = Field(ge=0.0, le=0.01, description="Deepest penetration allowed to a training object.")
     goal_bias: float = Field(gt=0.0, lt=1.0, description="Share of tree samples drawn in the start region.")
     surface_bias: float = Field(ge=0.0, lt=1.0, description="Share of tree samples drawn near the support's surface.")
+    route_bias: float = Field(ge=0.0, lt=1.0, description="Share of tree samples drawn near the hanging arm's threading route (from the mesh's skeleton: along the arm from the hang, over its tip and on past it).")
+    route_spread_m: float = Field(gt=0.0, le=0.05, description="Spread (standard deviation per axis) of the samples about the threading route.")
     surface_offset_m: float = Field(gt=0.0, le=0.05, description="Largest offset of those samples from the surface, along its normal.")
     plane_bias: float = Field(ge=0.0, le=1.0, description="Share of tree samples (of every kind) moved onto the threading plane: the vertical plane through the hang that holds the hanging keypoint's x axis.")
     max_checks: int = Field(ge=100, le=10_000_000, description="Planning budget per SKT, in pose checks.")
@@ -166,8 +168,8 @@ class RrtSktsParams(_Section):
         _check_range("start_dz_m", self.start_dz_m)
         if self.start_dx_m[0] <= 0:
             raise ValueError("start_dx_m: starts must lie in front of the hang (> 0)")
-        if self.goal_bias + self.surface_bias >= 1.0:
-            raise ValueError("surface_bias: goal_bias + surface_bias must be < 1")
+        if self.goal_bias + self.surface_bias + self.route_bias >= 1.0:
+            raise ValueError("route_bias: goal_bias + surface_bias + route_bias must be < 1")
         if self.dense_step_m > self.step_m:
             raise ValueError("dense_step_m: must not exceed step_m")
         if self.n_skts_per_test_support < self.n_skts_per_support:

@@ -77,8 +77,8 @@ def write_report(rep: Path, params, metrics: dict, results: list[dict], supports
                 "threading tree in keypoint space grown from the hang, each node's frame transported "
                 f"from its parent's (rotation-minimizing; no pitch limit; edge {p.step_m * 1000:.0f} mm, "
                 f"turn ≤ {p.max_turn_deg:.0f}° per edge, straight {p.lead_in_m * 1000:.0f} mm lead-in "
-                f"along the hanging keypoint's x, release lifted ≤ {p.max_lift_m * 1000:.0f} mm where the "
-                f"reference does not fit at the hang; samples: {p.goal_bias:.0%} start region, "
+                f"along the hanging keypoint's x, release ≤ {p.max_release_offset_m * 1000:.0f} mm from the hang "
+                f"(lifted and/or back along the arrival) where the reference does not fit there; samples: {p.goal_bias:.0%} start region, "
                 f"{p.surface_bias:.0%} within {p.surface_offset_m * 1000:.0f} mm of the support's "
                 f"surface, the rest uniform; {p.plane_bias:.0%} of them moved onto the vertical plane "
                 "through the hang that holds the arrival direction).")

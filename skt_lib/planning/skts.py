@@ -9,7 +9,7 @@ region's centre (the canonical start) where it can be, so that a support's SKTs 
 comparable as whole paths and their family is decided by the support, not by a random start.
 The orientation along the path is the SKT frames' (it follows the motion, its roll carried
 from the hanging orientation), so no start orientation is drawn. Every SKT ends at the hang
-(ξ_0 at most ``max_lift_m`` above it): :data:`REACH_TOL_M` is the contract's tolerance.
+(ξ_0 at most ``max_release_offset_m`` above it): :data:`REACH_TOL_M` is the contract's tolerance.
 
 Objects: the reference object and every *training* object (``objects.parquet`` split) take
 part in making labels; *test* objects never do — they are only swept along the stored SKT
@@ -30,6 +30,7 @@ from skt_lib.geometry.se3 import invert, pose_matrix
 from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
 from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn
+from skt_lib.planning.route import arm_route, route_sampler
 from skt_lib.planning.threading import ThreadingFailed, ThreadSettings, densify, plan_threading
 from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
@@ -37,6 +38,8 @@ from skt_lib.seeding import item_rng
 from skt_lib.sim.world import World
 
 BOUNDS_MARGIN_M = 0.08
+#: The threading route runs this far on past the tip of the hanging arm (m).
+ROUTE_BEYOND_M = 0.03
 #: An SKT "reaches the hang" when its ξ_0 lies within this of the reference hang keypoint.
 REACH_TOL_M = 0.005
 
@@ -109,9 +112,9 @@ def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams, T: int) -> list[SktT
 
 
 def thread_settings(p: RrtSktsParams, probe_radius: float, T: int) -> ThreadSettings:
-    return ThreadSettings(p.step_m, p.max_turn_deg, p.lead_in_m, p.max_lift_m, p.check_step_m,
+    return ThreadSettings(p.step_m, p.max_turn_deg, p.lead_in_m, p.max_release_offset_m, p.check_step_m,
                           probe_radius, p.goal_bias, p.surface_bias, p.max_checks,
-                          p.shortcut_steps, T, p.plane_bias)
+                          p.shortcut_steps, T, p.plane_bias, p.route_bias)
 
 
 def surface_sampler(mesh, max_offset_m: float):
@@ -177,6 +180,8 @@ def plan_support_skts(task: SktTask) -> dict:
     lower[0] = max(lower[0], 0.0)
     settings = thread_settings(p, radius, task.T)
     near = surface_sampler(support_mesh, p.surface_offset_m)
+    route = (route_sampler(arm_route(support_mesh, k_goal, ROUTE_BEYOND_M), p.route_spread_m)
+             if p.route_bias > 0 else None)
 
     def in_start(q: np.ndarray) -> bool:
         return bool(np.all(q - k_goal >= lo_off) and np.all(q - k_goal <= hi_off))
@@ -196,7 +201,7 @@ def plan_support_skts(task: SktTask) -> dict:
             try:
                 path, n_checks = plan_threading(goal, in_start, sample_start, lower, upper, collides,
                                                  settings, rng, k_goal + (lo_off + hi_off) / 2,
-                                                 near)
+                                                 near, route)
             except ThreadingFailed as err:
                 plan_s.append(time.perf_counter() - t0)
                 failures[err.reason] += 1

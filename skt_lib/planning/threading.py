@@ -15,17 +15,21 @@ give it:
   rotation between consecutive motion directions), so frames are defined while the tree
   grows, for any direction of motion — vertical included (no pitch limit); an edge may turn
   the motion by at most ``max_turn_deg`` from the next edge;
-- the release ξ_0 is the hanging keypoint, or where the probe does not fit there, a point
-  at most ``max_lift_m`` above it (the object drops in); nothing is set back in front of the
-  hang, so every SKT this planner returns ends at the hang;
+- the release ξ_0 is the hanging keypoint, or where the probe does not fit there (a ring
+  tilted along an angled peg meets the wall plate at the hang), a point at most
+  ``max_release_offset_m`` (≤ 4 mm) from it, lifted above it and/or moved back along the
+  arrival (the object drops or slides the rest of the way in); nothing is set back in front
+  of the hang beyond that, so every SKT this planner returns ends at the hang;
 - every pose is checked with the *probe*: the reference object (and, when asked, every
   training object) at its own keypoint frame, against the support and the wall. The frame at
   a waypoint depends on the motion arriving at it, so adding a child re-checks its parent's
   edge with the orientation that child gives it;
 - samples are drawn in the start region (``goal_bias``), near the support's surface
   (``surface_bias``, from the caller's ``sample_near``: points offset from the mesh along its
-  normals, so the tree follows hooks and tips of any shape, imported meshes included), or
-  uniformly in the bounds; a ``plane_bias`` share of them, of every kind, is moved onto the
+  normals, so the tree follows hooks and tips of any shape, imported meshes included), near
+  the hanging arm's threading route (``route_bias``, from the caller's ``sample_route``:
+  :mod:`skt_lib.planning.route`), or uniformly in the bounds; a ``plane_bias`` share of them,
+  of every kind but the route's, is moved onto the
   *threading plane* (:func:`threading_plane`: the vertical plane through the hang that holds
   the arrival direction), where a ring goes over a tip and down it without turning sideways.
   A path that leaves that plane to pass a tip beside it turns the object about the vertical
@@ -53,7 +57,10 @@ from skt_lib.geometry.se3 import skt_rotation
 from skt_lib.geometry.skt import cross3, executed_path, minimal_rotation, resample, skt_frames
 
 
+#: Release offsets tried first: lifts above the hang in steps of this (m); then the rest of
+#: a grid of :data:`RELEASE_STEP_M` (lift and back along the arrival).
 LIFT_STEP_M = 0.002
+RELEASE_STEP_M = 0.001
 #: A tree that has added fewer than STUCK_NODES nodes after STUCK_CHECKS checks is stuck at
 #: its release: the next release candidate is tried.
 STUCK_CHECKS, STUCK_NODES = 1500, 3
@@ -68,7 +75,7 @@ class ThreadSettings:
     step_m: float  # tree edge length
     max_turn_deg: float  # largest change of motion direction between consecutive edges
     lead_in_m: float  # straight final approach along the hanging keypoint's x axis
-    max_lift_m: float  # ξ_0 may be this far above the hang (the object drops in)
+    max_release_offset_m: float  # ξ_0 may be this far from the hang (lifted / back)
     check_step_m: float  # largest motion of any probe point between checked poses
     probe_radius_m: float  # farthest probe point from the keypoint
     goal_bias: float  # share of tree samples drawn in the start region
@@ -77,6 +84,7 @@ class ThreadSettings:
     shortcut_steps: int  # shortcut attempts on the found path
     T: int  # waypoints the SKT is executed with (resampled)
     plane_bias: float = 0.0  # share of tree samples moved onto the threading plane
+    route_bias: float = 0.0  # share of tree samples drawn near the arm's threading route
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -202,9 +210,10 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
                    lower: np.ndarray, upper: np.ndarray, collides: Callable[[np.ndarray], bool],
                    s: ThreadSettings, rng: np.random.Generator,
                    start_point: np.ndarray | None = None,
-                   sample_near: Callable[[np.random.Generator], np.ndarray] | None = None
+                   sample_near: Callable[[np.random.Generator], np.ndarray] | None = None,
+                   sample_route: Callable[[np.random.Generator], np.ndarray] | None = None
                    ) -> tuple[np.ndarray, int]:
-    """Keypoint positions ``(N, 3)``, ξ_0 (within ``max_lift_m`` above the hang) first,
+    """Keypoint positions ``(N, 3)``, ξ_0 (within ``max_release_offset_m`` of the hang) first,
     vertices at most ``step_m`` apart, whose execution (SKT frames) is clear for
     ``collides``; and the checks used.
 
@@ -213,11 +222,13 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
     ``sample_start(rng)``: a position in that region. ``collides(position, quat)``: the probe
     at a keypoint pose touches the support or wall. ``start_point``: the canonical start the
     path is extended to when it can be; ``sample_near(rng)``: a position near the support's
-    surface (drawn with ``surface_bias``). Raises :class:`ThreadingFailed`."""
+    surface (drawn with ``surface_bias``); ``sample_route(rng)``: a position near the arm's
+    threading route (:mod:`skt_lib.planning.route`, drawn with ``route_bias``, never moved
+    onto the threading plane). Raises :class:`ThreadingFailed`."""
     turn = np.radians(s.max_turn_deg)
     check = _Checker(collides, s)
     sampler = _Sampler(sample_start, sample_near, lower, upper, s,
-                       threading_plane(goal) if s.plane_bias > 0 else None)
+                       threading_plane(goal) if s.plane_bias > 0 else None, sample_route)
     n_rejected = 0
     for lead, a0, r0 in _releases(goal[:3, 3], _unit(goal[:3, 0]), check, s):
         while True:  # fresh trees from this release until one survives resampling (one budget)
@@ -256,21 +267,26 @@ class _Sampler:
     upper: np.ndarray
     s: ThreadSettings
     plane: tuple[np.ndarray, np.ndarray] | None = None  # (point, unit normal)
+    sample_route: Callable | None = None
 
     def __call__(self, rng: np.random.Generator) -> np.ndarray:
-        q = self._draw(rng)
-        if self.plane is not None and rng.random() < self.s.plane_bias:
+        q, on_route = self._draw(rng)
+        if self.plane is not None and not on_route and rng.random() < self.s.plane_bias:
             point, normal = self.plane
             q = q - float(np.dot(q - point, normal)) * normal
         return q
 
-    def _draw(self, rng: np.random.Generator) -> np.ndarray:
+    def _draw(self, rng: np.random.Generator) -> tuple[np.ndarray, bool]:
         u = rng.random()
         if u < self.s.goal_bias:
-            return self.sample_start(rng)
-        if self.sample_near is not None and u < self.s.goal_bias + self.s.surface_bias:
-            return self.sample_near(rng)
-        return rng.uniform(self.lower, self.upper)
+            return self.sample_start(rng), False
+        u -= self.s.goal_bias
+        if self.sample_near is not None and u < self.s.surface_bias:
+            return self.sample_near(rng), False
+        u -= self.s.surface_bias
+        if self.sample_route is not None and u < self.s.route_bias:
+            return self.sample_route(rng), True
+        return rng.uniform(self.lower, self.upper), False
 
 
 def threading_plane(goal: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -352,29 +368,49 @@ def arrival_directions(a0: np.ndarray) -> list[np.ndarray]:
     return out
 
 
+def release_offsets(max_offset_m: float) -> tuple[list[tuple[float, float]], list[tuple[float, float]]]:
+    """``(lift, back)`` offsets (m) of the release from the hang, ``hypot(lift, back) ≤
+    max_offset_m``, in two rounds: lifts alone in :data:`LIFT_STEP_M` steps, then every other
+    point of a :data:`RELEASE_STEP_M` grid, nearest the hang first (ties: less back first).
+    Every arrival direction gets the first round before any gets the second: where a lift
+    fits, it keeps more room for the tree (trying a 3 mm lift before the 4 mm one left a tall
+    upturned tip unthreaded on 6 of 8 seeds)."""
+    lifts = [(i * LIFT_STEP_M, 0.0) for i in range(int(np.floor(max_offset_m / LIFT_STEP_M + 1e-9)) + 1)]
+    n = int(np.floor(max_offset_m / RELEASE_STEP_M + 1e-9))
+    grid = [(i * RELEASE_STEP_M, j * RELEASE_STEP_M) for i in range(n + 1) for j in range(n + 1)
+            if np.hypot(i, j) * RELEASE_STEP_M <= max_offset_m + 1e-12]
+    rest = [o for o in grid if not any(np.allclose(o, q, rtol=0.0, atol=1e-12) for q in lifts)]
+    return lifts, sorted(rest, key=lambda o: (np.hypot(*o), o[1], o[0]))
+
+
 def _releases(hang: np.ndarray, a0: np.ndarray, check: _Checker, s: ThreadSettings):
     """Candidate straight lead-ins into the release ξ_0, as ``(lead (n + 1, 3) ξ_0 first,
-    arrival direction, its anchor frame)``: the hanging keypoint, then points lifted above it
-    (``LIFT_STEP_M`` steps, ≤ ``max_lift_m``); arriving along the hanging keypoint's x, then
-    along directions turned from it (:func:`arrival_directions`: where an upturned part stands
-    in front of the hang the object must come down into it); where the probe at the anchor
-    frame clears the whole lead-in. The anchor is the rule's frame of the arrival — the
-    hanging orientation the SKT frames give ξ_0. A tree stuck at one release tries the next."""
+    arrival direction, its anchor frame)``: ξ_0 at the hanging keypoint or lifted above it,
+    then (second round) offset from it on a finer grid, lifted and/or moved back along the
+    arrival (:func:`release_offsets`; at most ``max_release_offset_m``, never below the hang);
+    in each round arriving along the hanging keypoint's x, then along directions turned from
+    it (:func:`arrival_directions`: where an upturned part stands in front of the hang the
+    object must come down into it); where the probe at the anchor frame clears the whole
+    lead-in. The anchor is the rule's frame of the arrival — the hanging orientation the SKT
+    frames give ξ_0. A tree stuck at one release tries the next."""
     n = max(1, int(np.ceil(s.lead_in_m / s.step_m)))
     found = False
-    for d in arrival_directions(a0):
-        try:
-            r0 = skt_rotation(d)
-        except ValueError:  # vertical: the rule gives no anchor
-            continue
-        for lift in np.arange(0.0, s.max_lift_m + 1e-9, LIFT_STEP_M):
-            p0 = hang + [0.0, 0.0, lift]
-            lead = p0 - np.outer(np.arange(n + 1) * s.lead_in_m / n, d)
-            if check.frames(_frame(lead[-1], r0)[None]) and check.segment(lead[-1], p0, r0, r0):
-                found = True
-                yield lead, d, r0
+    for offsets in release_offsets(s.max_release_offset_m):
+        for d in arrival_directions(a0):
+            try:
+                r0 = skt_rotation(d)
+            except ValueError:  # vertical: the rule gives no anchor
+                continue
+            for lift, back in offsets:
+                p0 = hang + [0.0, 0.0, lift] - back * d
+                if p0[2] < hang[2] - 1e-12:  # never released below the hang
+                    continue
+                lead = p0 - np.outer(np.arange(n + 1) * s.lead_in_m / n, d)
+                if check.frames(_frame(lead[-1], r0)[None]) and check.segment(lead[-1], p0, r0, r0):
+                    found = True
+                    yield lead, d, r0
     if not found:
-        raise ThreadingFailed("no clear straight lead-in at the hang or lifted above it",
+        raise ThreadingFailed("no clear straight lead-in at the hang or near it",
                               "lead_in_blocked")
 
 

@@ -22,6 +22,7 @@ from skt_lib.planning.threading import (
     arrival_directions,
     limit_direction,
     plan_threading,
+    release_offsets,
     threading_plane,
     transport,
 )
@@ -29,7 +30,7 @@ from skt_lib.geometry.skt import executed_path, interpolate, resample, skt_frame
 from skt_lib.sim.world import World
 
 PEG_R = 0.004
-SETTINGS = ThreadSettings(step_m=0.01, max_turn_deg=35.0, lead_in_m=0.01, max_lift_m=0.004,
+SETTINGS = ThreadSettings(step_m=0.01, max_turn_deg=35.0, lead_in_m=0.01, max_release_offset_m=0.004,
                           check_step_m=0.002, probe_radius_m=0.06, goal_bias=0.2, surface_bias=0.0,
                           max_checks=20000, shortcut_steps=20, T=20)
 
@@ -91,9 +92,9 @@ def _assert_clear_and_within_limits(path, support, ring_mesh, k):
 def test_planned_path_is_clear_as_executed(tmp_path, tip_rise):
     path, n, goal, support, ring_mesh, k, (lo, hi) = _plan(tmp_path, 3, tip_rise)
     assert 0 < n <= SETTINGS.max_checks
-    # ξ_0 at the hang, or lifted at most max_lift_m above it: never set back
+    # ξ_0 at the hang, or at most max_release_offset_m from it, never below it
     off = path[0] - goal[:3, 3]
-    assert -1e-9 <= off[2] <= SETTINGS.max_lift_m + 1e-9 and np.abs(off[:2]).max() < 1e-9
+    assert np.linalg.norm(off) <= SETTINGS.max_release_offset_m + 1e-9 and off[2] >= -1e-9
     # the last stretch arrives along the hanging keypoint's x axis (here −x, toward the wall)
     assert skt_frames(path)[0][:3, :3] == pytest.approx(skt_rotation(goal[:3, 0]), abs=1e-9)
     assert np.all(path[-1] - goal[:3, 3] >= lo - 1e-9) and np.all(path[-1] - goal[:3, 3] <= hi + 1e-9)
@@ -257,3 +258,15 @@ def test_paths_end_at_the_canonical_start_when_given(tmp_path):
     assert sum(snapped) >= 3 and snapped[0]
     free = _plan(tmp_path, 3, 0.02)[0]
     assert not np.allclose(free[-1], goal[:3, 3] + centre)
+
+
+def test_release_offsets_lifts_first_then_the_grid_nearest_first_within_the_bound():
+    lifts, rest = release_offsets(0.004)
+    assert lifts == [(0.0, 0.0), (0.002, 0.0), (0.004, 0.0)]  # the first round: lifts alone
+    norms = [np.hypot(*o) for o in rest]
+    assert norms == sorted(norms) and max(norms) <= 0.004 + 1e-12
+    # with the lifts, every 1 mm grid point within 4 mm, each once: 17 in all
+    assert len(set(lifts + rest)) == len(lifts) + len(rest) == 17
+    assert (0.0, 0.004) in rest and (0.001, 0.0) in rest
+    assert (0.003, 0.003) not in rest  # 4.2 mm: beyond the bound
+    assert release_offsets(0.0) == ([(0.0, 0.0)], [])
