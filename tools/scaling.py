@@ -167,8 +167,10 @@ def fresh_repro(work: Path) -> dict:
         raise SystemExit(f"make repro exited {rc}; see {log}")
     wall = time.monotonic() - t0
     dirty = changed_files(d)
+    params = yaml.safe_load((d / "params.yaml").read_text())
     return {"commit": commit, "wall_s": wall, "setup_s": cloned + mon.first_seen,
-            "stages": per_stage, "git_status_clean": not dirty, "git_status": dirty}
+            "stages": per_stage, "git_status_clean": not dirty, "git_status": dirty,
+            "n_supports": params["mesh_gen"]["n_supports"], "skts_planned": skts_planned(params)}
 
 
 def changed_files(repo: Path) -> list[str]:
@@ -248,11 +250,11 @@ def presets_summary(data: dict) -> str:
     lines += [f"| {'embedded default' if r['n_supports'] == default else 'default, resized'}"
               f" | {r['n_supports']} | {k * r['n_supports']:,} | {r['wall_s'] / 60:.0f} min "
               f"(measured at {r['commit']}) |" for r in runs]
-    if f := data.get("fresh_repro"):
+    if f := data.get("fresh_repro"):  # the sizes it ran (older records: today's params)
         planned = skts_planned(yaml.safe_load((ROOT / "params.yaml").read_text()))
         lines.append(f"| embedded default, fresh clone + `make repro` (set-up included) | "
-                     f"{default} | {planned:,} | {f['wall_s'] / 60:.1f} min (measured at "
-                     f"{f['commit']}) |")
+                     f"{f.get('n_supports', default)} | {f.get('skts_planned', planned):,} | "
+                     f"{f['wall_s'] / 60:.1f} min (measured at {f['commit']}) |")
     if paper:
         slowest = max(paper, key=paper.get)
         lines.append(f"| paper | {PAPER['n_supports']} | "

@@ -68,12 +68,18 @@ def test_extrapolation_and_tables():
     assert "| `rrt_skts` | " in table and "| 1.20 | 800 |" in table
     assert "extrapolat" in table
     summary = scaling.presets_summary(data)
-    assert "| embedded default | 120 | 480 | 33 min (measured at abc) |" in summary
+    params = yaml.safe_load((scaling.ROOT / "params.yaml").read_text())
+    default = params["mesh_gen"]["n_supports"]  # a run at the committed count is the default
+    label = "embedded default" if default == 120 else "default, resized"
+    assert f"| {label} | 120 | 480 | 33 min (measured at abc) |" in summary
     assert "fresh clone" not in summary
     data["fresh_repro"] = {"commit": "def", "wall_s": 1700.0, "setup_s": 90.0, "stages": {},
                            "git_status_clean": True}
-    planned = scaling.skts_planned(yaml.safe_load((scaling.ROOT / "params.yaml").read_text()))
-    assert (f"| embedded default, fresh clone + `make repro` (set-up included) | 120 | {planned} | "
+    planned = scaling.skts_planned(params)  # an older record: the committed sizes
+    assert (f"| embedded default, fresh clone + `make repro` (set-up included) | {default} | "
+            f"{planned:,} | 28.3 min (measured at def) |") in scaling.presets_summary(data)
+    data["fresh_repro"].update(n_supports=120, skts_planned=560)  # the sizes it measured
+    assert ("| embedded default, fresh clone + `make repro` (set-up included) | 120 | 560 | "
             "28.3 min (measured at def) |") in scaling.presets_summary(data)
     assert f"≈ {sum(paper.values()) / 3600:.1f} h (**extrapolated**; `rrt_skts`" in summary
     assert scaling.table({"runs": []}).startswith("Not measured")
@@ -90,9 +96,12 @@ def test_fresh_clones_and_runs_make_repro_with_set_up_timed(tmp_path, monkeypatc
         "repro:\n\tsleep 1.5\n"  # the "set-up"
         f"\t{sys.executable} -c 'import time; time.sleep(1.2)' -m stages.toy\n"
         "\ttouch untracked.txt\n")
+    (repo / "params.yaml").write_text(yaml.safe_dump({  # the sizes the clone runs
+        "mesh_gen": {"n_supports": 30, "n_test_per_level": 1},
+        "rrt_skts": {"n_skts_per_support": 2, "n_skts_per_test_support": 3}}))
     git = ["git", "-c", "user.name=t", "-c", "user.email=t@t"]
     subprocess.run(["git", "init", "-q", str(repo)], check=True)
-    subprocess.run([*git, "add", "Makefile"], cwd=repo, check=True)
+    subprocess.run([*git, "add", "Makefile", "params.yaml"], cwd=repo, check=True)
     subprocess.run([*git, "commit", "-qm", "toy"], cwd=repo, check=True)
     monkeypatch.setattr(scaling, "ROOT", repo)
     out = tmp_path / "out"
@@ -103,6 +112,7 @@ def test_fresh_clones_and_runs_make_repro_with_set_up_timed(tmp_path, monkeypatc
     assert 1.4 <= f["setup_s"] <= f["wall_s"] - 1.0
     assert f["wall_s"] >= 2.7 and f["git_status_clean"] is False
     assert len(f["commit"]) >= 7
+    assert (f["n_supports"], f["skts_planned"]) == (30, 26 * 2 + 4 * 3)
     text = scaling.fresh_summary({"machine": "2 cores", "fresh_repro": f})
     assert f"commit {f['commit']}" in text and "`toy`" in text and "**not** clean" in text
     assert f["git_status"] == ["?? untracked.txt"] and "(`untracked.txt`)" in text
