@@ -64,9 +64,7 @@ def test_train_report_units():
     assert "normalised" in _unit("train_traj") and "normalised" in _unit("train_loss")
 
 
-def test_train_diagnostics_tool_writes_its_tables(tiny_dataset, tmp_path):
-    """tools/train_diagnostics.py on the tiny dataset: every section present, finite, the
-    learning curve on ¼, ½ and all training supports, and the overfit run lowers the error."""
+def _diagnostics_tool():
     import importlib.util
     from pathlib import Path
 
@@ -74,6 +72,46 @@ def test_train_diagnostics_tool_writes_its_tables(tiny_dataset, tmp_path):
         "train_diagnostics", Path(__file__).parents[2] / "tools" / "train_diagnostics.py")
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
+    return tool
+
+
+def test_contact_misses_splits_along_and_across_the_arm():
+    """Each view's pick is a point at a known offset from the contact: along the arm, across
+    it, within 1 cm; a view that does not show the contact is not counted."""
+    import torch
+
+    from skt_lib.learning.data import SupportData
+
+    tool = _diagnostics_tool()
+    contact = np.array([0.05, 0.0, 0.01])
+    offsets = [[0.03, 0.0, 0.0], [-0.025, 0.004, 0.0], [0.0, 0.0, 0.02], [0.005, 0.0, 0.0],
+               [0.0, 0.0, 0.0]]  # along, along, across, within; the last view hides the contact
+    pts = np.random.default_rng(0).uniform(-0.2, 0.2, (5, 32, 3)).astype(np.float32)
+    for v, off in enumerate(offsets):
+        pts[v, 7] = contact + off
+    aff = np.zeros((5, 32), np.float32)
+    sup = SupportData("s0", "val", 0, pts, aff, np.zeros((1, 10, 3)), contact, aff,
+                      np.array([True, True, True, True, False]), "hard")
+
+    class Picks:  # the affordance peaks at point 7 of every view
+        def eval(self):
+            return self
+
+        def __call__(self, xyz, scale):
+            a = torch.zeros(xyz.shape[:2])
+            a[:, 7] = 1.0
+            return {"affordance": a}
+
+    r = tool.contact_misses(Picks(), [sup], [0, 1, 2, 3, 4], {"s0": np.array([1.0, 0.0, 0.0])})
+    assert r["hard"] == r["all"] == {"visible": 4, "within_1cm": 1, "misses_along_arm": 2,
+                                     "within_1cm_across_arm": 3}
+    assert set(r) == {"hard", "all"}
+
+
+def test_train_diagnostics_tool_writes_its_tables(tiny_dataset, tmp_path):
+    """tools/train_diagnostics.py on the tiny dataset: every section present, finite, the
+    learning curve on ¼, ½ and all training supports, and the overfit run lowers the error."""
+    tool = _diagnostics_tool()
     params, data, _ = tiny_dataset
     assert tool.main(["--params", str(params), "--data-root", str(data), "--out", str(tmp_path),
                       "--epochs", "1", "--steps", "30"]) == 0
@@ -85,7 +123,13 @@ def test_train_diagnostics_tool_writes_its_tables(tiny_dataset, tmp_path):
     for r in d["learning_curve"] + [d["contact_weight_0"]]:
         assert np.isfinite(r["val_traj_l2_mm"]) and r["epochs"] == 1
     assert set(d["committed_model"]) == {"train", "val"}
-    assert "Learning curve" in (tmp_path / "diagnostics.md").read_text()
+    e = d["error_sources"]
+    assert set(e) == {"predicted", "true_family", "true_family_and_contact"}
+    assert all(np.isfinite(v["traj_mm"]) and np.isfinite(v["xi0_mm"]) for v in e.values())
+    assert d["contact_misses"]["all"]["visible"] == sum(
+        r["visible"] for lv, r in d["contact_misses"].items() if lv != "all")
+    md = (tmp_path / "diagnostics.md").read_text()
+    assert "Learning curve" in md and "Where the contact misses" in md
 
 
 def test_train_twice_gives_the_same_checkpoint_bytes(tiny_dataset, tmp_path):
