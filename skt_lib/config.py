@@ -44,7 +44,11 @@ class ComputeParams(_Section):
 
 
 class MeshGenParams(_Section):
-    n_supports: int = Field(ge=4, le=5000, description="Supporting items to generate.")
+    n_supports: int = Field(ge=4, le=5000, description="Supporting items the train/val/test split is drawn from.")
+    n_extra_train_supports: int = Field(
+        default=0, ge=0, le=5000,
+        description="Further supporting items, generated after the n_supports and all training: "
+                    "more training data with the same validation and test supports.")
     n_val_per_level: int = Field(ge=0, description="Validation supports per difficulty level.")
     n_test_per_level: int = Field(ge=1, description="Test supports per difficulty level.")
     n_objects_per_category: int = Field(ge=2, le=100, description="Objects per category.")

@@ -38,7 +38,7 @@ def main(argv=None) -> int:
         shutil.rmtree(out / sub, ignore_errors=True)
 
     t0 = time.perf_counter()
-    tasks = [SupportTask(seed, i, p, str(out)) for i in range(p.n_supports)]
+    tasks = [SupportTask(seed, i, p, str(out)) for i in range(p.n_supports + p.n_extra_train_supports)]
     supports, s_fail, s_failed = run_items(build_support, tasks, params.compute, "supports")
     t_sup = time.perf_counter() - t0
     otasks = [ObjectTask(seed, "reference", 0, p, str(out))]
@@ -51,9 +51,13 @@ def main(argv=None) -> int:
         log.error("the reference object failed: %s", o_failed)
         return 1
 
-    splits = assign_splits([s["support_id"] for s in supports], [s["difficulty"] for s in supports],
+    split_ids = {t.support_id for t in tasks[:p.n_supports]}  # the split is drawn from these
+    drawn = [s for s in supports if s["support_id"] in split_ids]
+    splits = assign_splits([s["support_id"] for s in drawn], [s["difficulty"] for s in drawn],
                            seed, p.n_val_per_level, p.n_test_per_level)
-    for s, split in zip(supports, splits):
+    for s in supports:
+        s["split"] = "train"  # the extra supports: n_extra_train_supports
+    for s, split in zip(drawn, splits):
         s["split"] = split
     real = [o for o in objects if not o["is_reference"]]
     o_splits = assign_splits([o["object_id"] for o in real], [o["category"] for o in real], seed, 0,
@@ -73,7 +77,8 @@ def main(argv=None) -> int:
         "n_objects": len(real),
         "supports_by_difficulty": {lv: by_level[lv] for lv in LEVELS},
         "test_supports_by_difficulty": {lv: test_level[lv] for lv in LEVELS},
-        "supports_by_split": dict(sorted(Counter(splits).items())),
+        "supports_by_split": dict(sorted(Counter(s["split"] for s in supports).items())),
+        "n_extra_train_supports": len(supports) - len(drawn),
         "supports_by_family": dict(sorted(Counter(s["family"] for s in supports).items())),
         "objects_by_category": {c: sum(o["category"] == c for o in real) for c in OBJECT_CATEGORIES},
         "test_objects_by_category": {c: sum(o["category"] == c and o["split"] == "test" for o in real)

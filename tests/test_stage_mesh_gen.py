@@ -1,6 +1,7 @@
 """mesh_gen end to end on tiny params: contract, byte-identical reruns, worker-count independence."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -69,6 +70,30 @@ def test_contract_and_determinism(tmp_path, write_params, tiny_dict):
     tiny_dict["common"]["seed"] = 8
     data_c, _ = _run(tmp_path, write_params, tiny_dict, "c")
     assert _files(data_c) != _files(data)
+
+
+@pytest.mark.slow
+def test_extra_training_supports_leave_the_split_as_it_was(tmp_path, write_params, tiny_dict):
+    """n_extra_train_supports adds supports after the n_supports, all training; every support
+    of the run without them comes out byte for byte the same, in the same split."""
+    tiny_dict["mesh_gen"]["n_supports"] = 8
+    tiny_dict["mesh_gen"]["n_val_per_level"] = 0
+    data, _ = _run(tmp_path, write_params, tiny_dict, "plain")
+    tiny_dict["mesh_gen"]["n_extra_train_supports"] = 3
+    data_x, rep_x = _run(tmp_path, write_params, tiny_dict, "extra")
+    plain = read_table(data / "supports.parquet", SUPPORTS).set_index("support_id")
+    extra = read_table(data_x / "supports.parquet", SUPPORTS).set_index("support_id")
+    assert list(extra.index) == [f"support_{i:05d}" for i in range(11)]
+    assert (extra.loc[plain.index, "split"] == plain["split"]).all()
+    assert set(extra.loc[~extra.index.isin(plain.index), "split"]) == {"train"}
+    files, files_x = _files(data), _files(data_x)
+    del files[Path("supports.parquet")]
+    assert {k: files_x[k] for k in files} == files  # the same meshes and URDFs, byte for byte
+    per_support = sum(k.parts[0] == "supports" for k in files) // 8
+    new = {k for k in files_x if k not in files and k != Path("supports.parquet")}
+    assert len(new) == 3 * per_support and all(k.parts[0] == "supports" for k in new)
+    m = json.loads((rep_x / "metrics.json").read_text())
+    assert m["n_extra_train_supports"] == 3 and m["supports_by_split"]["train"] == 11 - 4
 
 
 def test_bad_params_fail_before_writing(tmp_path, write_params, tiny_dict):

@@ -170,7 +170,7 @@ def fresh_repro(work: Path) -> dict:
     params = yaml.safe_load((d / "params.yaml").read_text())
     return {"commit": commit, "wall_s": wall, "setup_s": cloned + mon.first_seen,
             "stages": per_stage, "git_status_clean": not dirty, "git_status": dirty,
-            "n_supports": params["mesh_gen"]["n_supports"], "skts_planned": skts_planned(params)}
+            "n_supports": total_supports(params), "skts_planned": skts_planned(params)}
 
 
 def changed_files(repo: Path) -> list[str]:
@@ -227,12 +227,19 @@ def table(data: dict) -> str:
     return "\n".join(lines)
 
 
+def total_supports(params: dict) -> int:
+    """Supports a run at ``params`` (a dict of params.yaml) generates: the ``n_supports`` the
+    split is drawn from and the ``n_extra_train_supports``."""
+    m = params["mesh_gen"]
+    return m["n_supports"] + m.get("n_extra_train_supports", 0)
+
+
 def skts_planned(params: dict) -> int:
     """SKT attempts of a run at ``params`` (a dict of params.yaml): test supports plan
-    ``n_skts_per_test_support``, the others ``n_skts_per_support``."""
+    ``n_skts_per_test_support``, the others (extra training supports too) ``n_skts_per_support``."""
     r, m = params["rrt_skts"], params["mesh_gen"]
     n_test = len(LEVELS) * m["n_test_per_level"]
-    return (r["n_skts_per_support"] * (m["n_supports"] - n_test)
+    return (r["n_skts_per_support"] * (total_supports(params) - n_test)
             + r.get("n_skts_per_test_support", r["n_skts_per_support"]) * n_test)
 
 

@@ -123,5 +123,8 @@ def test_skts_planned_counts_test_supports_at_their_own_rate():
     params = {"rrt_skts": {"n_skts_per_support": 4, "n_skts_per_test_support": 8},
               "mesh_gen": {"n_supports": 120, "n_test_per_level": 5}}
     assert scaling.skts_planned(params) == 100 * 4 + 20 * 8
+    params["mesh_gen"]["n_extra_train_supports"] = 30  # all training: 4 SKTs each
+    assert scaling.skts_planned(params) == 130 * 4 + 20 * 8
+    assert scaling.total_supports(params) == 150
     del params["rrt_skts"]["n_skts_per_test_support"]  # params from before the split count
-    assert scaling.skts_planned(params) == 120 * 4
+    assert scaling.skts_planned(params) == 150 * 4
