@@ -11,14 +11,18 @@ Deviation from "``common.seed`` sweeps via ``dvc exp run``": changing ``common.s
 regenerates the whole dataset (other supports, other test set; ~35 min a seed here), which
 mixes the data's variance into the model's. Here only the training seed moves.
 
-Writes ``data/seed_sweep/seed_<s>/`` (models and sim_eval outputs, git-ignored scratch) and
+Writes ``data/seed_sweep/seed_<s>/`` (models and sim_eval outputs, git-ignored scratch: an
+interrupted run resumes from it; it is wiped when ``params.yaml`` or ``dvc.lock`` — the data
+it was made from — differ from the stamp it was made under) and
 ``reports/seeds/{seeds.json, report.md}``: per method and level the success rate of each
 seed, mean and min–max. Seed ``common.seed`` is read from ``reports/sim_eval/metrics.json``
 (the committed run); it must be up to date (``dvc status``).
 """
 
 import argparse
+import hashlib
 import json
+import shutil
 import sys
 from pathlib import Path
 
@@ -90,6 +94,24 @@ def evaluate(params_path: Path, root: Path, out: Path) -> dict:
     return json.loads(metrics.read_text())
 
 
+def inputs_key(params_path: Path, data_root: Path) -> str:
+    """What a seed's scratch outputs were made from: ``params.yaml`` and the ``dvc.lock``
+    beside ``data_root`` (the hashes of every stage's inputs and outputs)."""
+    h = hashlib.sha256(params_path.read_bytes())
+    lock = data_root.resolve().parent / "dvc.lock"
+    h.update(lock.read_bytes() if lock.is_file() else b"")
+    return h.hexdigest()
+
+
+def fresh_scratch(out: Path, key: str) -> None:
+    """Keep ``out`` (resume) only when its stamp is ``key``; else start it empty, stamped."""
+    stamp = out / "inputs.sha256"
+    if out.exists() and not (stamp.is_file() and stamp.read_text() == key):
+        shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+    stamp.write_text(key)
+
+
 def spread(per_seed: dict[int, dict]) -> dict:
     """{method: {"success": {level: {"seeds": [...], "mean", "min", "max"}}, …}} (also
     ``success_single`` for the proposing methods)."""
@@ -150,6 +172,7 @@ def main(argv=None) -> int:
     for seed in range(base + 1, base + args.seeds):
         out = args.data_root / "seed_sweep" / f"seed_{seed}"
         print(f"seed {seed}: training → {out}", flush=True)
+        fresh_scratch(out, inputs_key(args.params, args.data_root))
         train_models(params, args.data_root, seed, out)
         per_seed[seed] = evaluate(args.params, args.data_root, out)
     table = spread(per_seed)
