@@ -22,10 +22,8 @@ from tqdm import tqdm
 from skt_lib.config import load_params
 from skt_lib.learning.data import load_training_set
 from skt_lib.learning.pointnet2 import geometry_memo
-from skt_lib.learning.predictor import SktPredictor
-from skt_lib.learning.train import from_params, train_sctdn
-from skt_lib.learning.train_baselines import train_vatmart, vatmart_config
-from skt_lib.learning.vatmart import VatMartPredictor
+from skt_lib.learning.train import from_params
+from skt_lib.learning.train_baselines import train_baseline
 from stages._common import parse_args
 from viz.figures import curves
 from viz.report import Report, write_metrics, write_run_log
@@ -54,14 +52,9 @@ def main(argv=None) -> int:
                          {k2: v if v is None else round(v, 4) for k2, v in m.items()})
 
             t0 = time.perf_counter()
-            if name == "sctdn_cp_feature":
-                model, best = train_sctdn(_replace(cfg, condition="contact_point"), data.templates,
-                                          train, val, settings, seed, on_epoch)
-                SktPredictor(model).save(out / name)
-            else:
-                vcfg = vatmart_config(name, cfg, pb)
-                model, best = train_vatmart(vcfg, train, val, settings, seed, n_prop, on_epoch)
-                VatMartPredictor(model).save(out / name)
+            predictor, best = train_baseline(name, cfg, data.templates, train, val, settings,
+                                             seed, n_prop, pb, on_epoch)
+            predictor.save(out / name)
             walls[name] = time.perf_counter() - t0
             curve = [h["val_traj_l2_mm"] for h in history]
             metrics[name] = {**best, "best_epoch": int(np.argmin(curve)), "epochs": p.epochs}
@@ -70,12 +63,6 @@ def main(argv=None) -> int:
     _write_report(rep, metrics, histories, len(train), len(val), p, n_prop)
     write_run_log(Path(args.log_dir), "train_baselines", {"wall_s": walls})
     return 0
-
-
-def _replace(cfg, **kw):
-    from dataclasses import replace
-
-    return replace(cfg, **kw)
 
 
 def _write_report(rep: Path, metrics: dict, histories: dict, n_train: int, n_val: int, p,

@@ -2,14 +2,22 @@
 the loop, data and budget of SCTDN (:func:`skt_lib.learning.train.fit`)."""
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import torch
 
 from skt_lib.learning.data import SupportData
+from skt_lib.learning.predictor import SktPredictor
 from skt_lib.learning.sctdn import SctdnConfig, traj_distance
-from skt_lib.learning.train import CONTACT_OK_M, TrainSettings, fit, make_batch
-from skt_lib.learning.vatmart import VatMart, VatMartConfig, pick_targets, vatmart_loss
+from skt_lib.learning.train import CONTACT_OK_M, TrainSettings, fit, make_batch, train_sctdn
+from skt_lib.learning.vatmart import (
+    VatMart,
+    VatMartConfig,
+    VatMartPredictor,
+    pick_targets,
+    vatmart_loss,
+)
 
 #: The VAT-Mart variants: the conditioning feature of each (paper §VI-A).
 CONDITION = {"vatmart": "contact_point", "vatmart_mod": "shape"}
@@ -17,6 +25,23 @@ CONDITION = {"vatmart": "contact_point", "vatmart_mod": "shape"}
 #: Validation latents: drawn once from this seed, the same for every epoch and model, so
 #: epochs are compared on the same samples.
 VAL_LATENT_SEED = 0
+
+
+def train_baseline(name: str, cfg: SctdnConfig, templates, train: list[SupportData],
+                   val: list[SupportData], st: TrainSettings, seed: int, n_proposals: int,
+                   baselines, on_epoch: Callable[[int, dict], None] | None = None
+                   ) -> tuple[SktPredictor | VatMartPredictor, dict]:
+    """Train baseline ``name`` with SCTDN's config ``cfg``, ``templates`` and loop:
+    ``sctdn_cp_feature`` (SCTDN conditioned on the contact-point feature) or a VAT-Mart
+    variant (:data:`CONDITION`, params section ``baselines``); the predictor to save and
+    its best validation epoch's metrics."""
+    if name == "sctdn_cp_feature":
+        model, best = train_sctdn(replace(cfg, condition="contact_point"), templates, train, val,
+                                  st, seed, on_epoch)
+        return SktPredictor(model), best
+    model, best = train_vatmart(vatmart_config(name, cfg, baselines), train, val, st, seed,
+                                n_proposals, on_epoch)
+    return VatMartPredictor(model), best
 
 
 @torch.no_grad()

@@ -50,7 +50,8 @@ def test_training_refuses_to_select_on_training_supports(name, monkeypatch, tmp_
     monkeypatch.setattr(data, "read_npz", lambda *a: {"templates": np.zeros((1, 10, 3)),
                                                       "T": 10, "k": 1})
     monkeypatch.setattr(data, "load_supports", lambda *a: sup)
-    monkeypatch.setattr(stage, "train_sctdn", lambda *a: pytest.fail("trained without val"))
+    trainer = "train_sctdn" if name == "train" else "train_baseline"
+    monkeypatch.setattr(stage, trainer, lambda *a: pytest.fail("trained without val"))
     with pytest.raises(DataError, match="0 validation supports.*n_val_per_level"):
         stage.main(["--data-root", str(tmp_path), "--data-dir", str(tmp_path / "o"),
                     "--reports-dir", str(tmp_path / "r")])
