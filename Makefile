@@ -87,9 +87,13 @@ mutation: $(STAMP)
 
 seeds: $(STAMP)
 	@# the learned methods retrained with two more training seeds on the committed data and
-	@# evaluated on the same trials: reports/seeds/{seeds.json,report.md}; needs `make repro`
-	@# (about 15 min a seed on 2 cores)
+	@# evaluated on the same trials (reports/seeds/seed_runs.json), then sim_eval rerun to
+	@# merge them into Table I (reports/sim_eval: seeds.<method>.success_mean …); needs an
+	@# up-to-date `make repro` (about 25 min on 2 cores)
+	@$(BIN)/dvc status --quiet train_baselines || { echo "make seeds: the models are not up to date (dvc status train_baselines): run make repro first" >&2; exit 2; }
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python -m tools.seed_sweep
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro sim_eval
+	$(BIN)/python -m tools.docs_results
 
 train-diagnostics: $(STAMP)
 	@# short seeded SCTDN runs (overfit one batch, learning curve, contact term, train vs

@@ -3,7 +3,9 @@ method's SKT; the strict predicate decides; Table I.
 
 Inputs:  data/mesh_gen, data/rotation_extraction/keypoints.parquet, data/rrt_skts/skts.parquet,
          data/render_views, data/train (SCTDN); params common, compute, contact_sim (physics),
-         clustering.T, sim_eval.
+         clustering.T, sim_eval; reports/seeds/seed_runs.json (the learned methods' outcomes
+         under the extra training seeds, ``make seeds``: merged into ``metrics["seeds"]``
+         when made from the same inputs, see :mod:`skt_lib.eval.seeds`).
 Outputs: data/sim_eval/trials.parquet (one row per trial), data/sim_eval/sim_eval.rrd
          (rollouts); reports/sim_eval/{metrics.json, report.md, PNGs}.
 """
@@ -30,6 +32,7 @@ from skt_lib.eval.protocol import (
 )
 from skt_lib.eval.report import write_report
 from skt_lib.eval.rounds import pick_rollouts, replay, run_rounds
+from skt_lib.eval.seeds import seed_block
 from skt_lib.eval.user_items import load_user_items, run_user_trials, user_metrics
 from skt_lib.geometry.export import read_obj
 from skt_lib.io import write_table
@@ -104,6 +107,10 @@ def main(argv=None) -> int:
     if p.extra_supports or p.extra_objects:
         write_table(out / "user_trials.parquet", user_rows, TRIALS)
         metrics["user_items"] = user_metrics(user_rows, p.methods, user_md5)
+    metrics["seeds"] = seed_block(pairs, seed, rep.parent / "seeds" / "seed_runs.json",
+                                  Path(args.params).parent)
+    if metrics["seeds"]["status"] != "ok":
+        log.warning("Table I over training seeds: %s", metrics["seeds"]["reason"])
     write_metrics(rep, metrics)
     write_run_log(Path(args.log_dir), "sim_eval", {
         "wall_s": wall, "n_trials": len(trials), "trials_per_min": 60 * len(trials) / wall,

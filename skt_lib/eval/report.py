@@ -86,6 +86,7 @@ def write_report(rep: Path, trials: pd.DataFrame, pairs: pd.DataFrame, metrics: 
                 "Brackets: Wilson 95 % score interval of the rate; trials on one support are "
                 "correlated, so the intervals are if anything too narrow. Paper rows have none. "
                 + _omnihang_note(metrics))
+    _seeds_section(report, metrics.get("seeds"))
     _ablation_table(report, metrics)
     _orderings(report, metrics["paper_orderings"], pairs)
     _paired_table(report, metrics.get("paired", {}))
@@ -184,6 +185,50 @@ def _orderings(report: Report, checks: list[dict], pairs: pd.DataFrame) -> None:
                 "prediction) is the limit, so methods are best told apart on the oracle-hung "
                 "pairs. A method above the oracle on its failed pairs finds SKTs that none of "
                 "the support's stored ground-truth SKTs gives the arm.")
+
+
+def _seeds_section(report: Report, seeds: dict | None) -> None:
+    """Table I's learned methods over the training seeds, mean [min–max], and the paper's
+    orderings judged on the mean with each seed's McNemar test."""
+    report.heading("Table I over training seeds: success % mean [min–max]")
+    if not seeds or seeds["status"] != "ok":
+        report.text("Not merged: " + (seeds["reason"] if seeds else "no seed runs") + ".")
+        return
+    def span(b: dict, f: str, k: str) -> str:
+        if b[f + "_mean"][k] is None:
+            return "–"
+        return f"{_pct(b[f + '_mean'][k])} [{_pct(b[f + '_min'][k])}–{_pct(b[f + '_max'][k])}]"
+
+    rows = []
+    for m, b in seeds.items():
+        if not isinstance(b, dict) or "success_mean" not in b:
+            continue
+        rows.append([m, *(span(b, "success", k) for k in ("all", *LEVELS))])
+        if "success_single_mean" in b:
+            rows.append([f"{m}, first proposal only",
+                         *(span(b, "success_single", k) for k in ("all", *LEVELS))])
+    report.table(["method", "All", "Easy", "Normal", "Hard", "Very Hard"], rows)
+    report.text(f"Training seeds {', '.join(map(str, seeds['seeds']))} (the first is this run's "
+                "`common.seed`; the others' outcomes come from `reports/seeds/seed_runs.json`, "
+                "made by `make seeds` from the same data, code and params, and evaluated on the "
+                "same trials): the spread is the training seed's alone.")
+    rows = []
+    for c in seeds["paper_orderings"]:
+        per = c["per_seed"].values()
+        ci = c["diff_ci95"]
+        rows.append([c["claim"], _pct(c["rate_a_mean"]), _pct(c["rate_b_mean"]),
+                     "yes" if c["holds"] else "no", f"{c['holds_on_seeds']} / {len(per)}",
+                     f"{_pct(c['diff_mean'])} [{_pct(ci[0])}, {_pct(ci[1])}]" if ci else "–",
+                     ", ".join(f"{x['n_a_only']}/{x['n_b_only']}" for x in per),
+                     ", ".join(f"{x['p_value']:.2g}" for x in per)])
+    report.table(["claim", "A % mean", "B % mean", "holds (mean)", "seeds where it holds",
+                  "A − B, points [95 %]", "A only / B only per seed", "McNemar p per seed"],
+                 rows)
+    report.text("A − B: the difference of the mean rates, with a 95 % interval from a bootstrap "
+                "over test supports (a support's pairs drawn together, every seed's outcome on "
+                "them): trials on one support are correlated, so supports are the unit. "
+                "McNemar per seed on the same pairs; 'holds' compares the mean rates, with the "
+                "margin where the claim has one.")
 
 
 def _ablation_table(report: Report, metrics: dict) -> None:

@@ -1,32 +1,29 @@
-"""tools/seed_sweep.py: a seed's scratch outputs are reused only for the data they were made from."""
+"""tools/seed_sweep.py: a seed's scratch outputs are reused only for the inputs they were made
+from (the key itself: tests/eval/test_seeds.py)."""
 
-from tools.seed_sweep import fresh_scratch, inputs_key
+import pytest
+
+from tools.seed_sweep import fresh_scratch, main
 
 
-def test_scratch_is_kept_for_the_same_inputs_and_wiped_for_others(tmp_path):
-    repo = tmp_path / "repo"
-    (repo / "data").mkdir(parents=True)
-    params, lock = repo / "params.yaml", repo / "dvc.lock"
-    params.write_text("common: {seed: 1}\n")
-    lock.write_text("stages: {train: {outs: [md5: a]}}\n")
-    out = repo / "data" / "seed_sweep" / "seed_2"
-    key = inputs_key(params, repo / "data")
-    fresh_scratch(out, key)
+def test_scratch_is_kept_for_the_same_key_and_wiped_for_another(tmp_path):
+    out = tmp_path / "data" / "seed_sweep" / "seed_2"
+    fresh_scratch(out, "k1")
     (out / "model.pt").write_text("trained")
-    fresh_scratch(out, inputs_key(params, repo / "data"))  # same data: resume
+    fresh_scratch(out, "k1")  # the same inputs: resume
     assert (out / "model.pt").read_text() == "trained"
 
-    lock.write_text("stages: {train: {outs: [md5: b]}}\n")  # the data changed
-    fresh_scratch(out, inputs_key(params, repo / "data"))
-    assert not (out / "model.pt").exists() and (out / "inputs.sha256").is_file()
+    fresh_scratch(out, "k2")  # the data, code or params changed
+    assert not (out / "model.pt").exists() and (out / "inputs.sha256").read_text() == "k2"
 
-    (out / "model.pt").write_text("trained")
-    params.write_text("common: {seed: 2}\n")  # the params changed
-    fresh_scratch(out, inputs_key(params, repo / "data"))
-    assert not (out / "model.pt").exists()
-
-    legacy = repo / "data" / "seed_sweep" / "seed_3"  # made before stamps: not trusted
+    legacy = tmp_path / "data" / "seed_sweep" / "seed_3"  # made before stamps: not trusted
     legacy.mkdir()
     (legacy / "model.pt").write_text("old")
-    fresh_scratch(legacy, inputs_key(params, repo / "data"))
+    fresh_scratch(legacy, "k2")
     assert not (legacy / "model.pt").exists()
+
+
+def test_fewer_than_two_seeds_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["--seeds", "1", "--params", str(tmp_path / "params.yaml")])
+    assert "--seeds: at least 2" in capsys.readouterr().err
