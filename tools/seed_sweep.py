@@ -112,6 +112,8 @@ def main(argv=None) -> int:
     ap.add_argument("--data-root", default="data", type=Path)
     ap.add_argument("--reports", default="reports", type=Path)
     ap.add_argument("--seeds", type=int, default=3, help="seeds in all, the committed one included")
+    ap.add_argument("--scratch", type=Path, default=None,
+                    help="models and sim_eval outputs per seed (default: DATA_ROOT/seed_sweep)")
     args = ap.parse_args(argv)
     if args.seeds < 2:
         ap.error(f"--seeds: at least 2 (the committed one and one more), got {args.seeds}")
@@ -125,7 +127,7 @@ def main(argv=None) -> int:
     base = params.common.seed
     pairs = {}
     for seed in range(base + 1, base + args.seeds):
-        out = args.data_root / "seed_sweep" / f"seed_{seed}"
+        out = (args.scratch or args.data_root / "seed_sweep") / f"seed_{seed}"
         print(f"seed {seed}: {methods} → {out}", flush=True)
         fresh_scratch(out, key)
         train_models(params, args.data_root, seed, out, methods)

@@ -76,6 +76,9 @@ def test_metrics_contract_matches_the_trials_table(evaluated):
     # the orderings the paper reports are checked wherever both methods ran
     claims = {c["claim"] for c in metrics["paper_orderings"]}
     assert claims == {"sctdn ≥ template_only + 10 points (all levels)"}  # no vatmart_mod here
+    # no make seeds beside these reports: Table I over seeds says so, with no rates
+    assert metrics["seeds"] == {"status": "missing", "reason": metrics["seeds"]["reason"]}
+    assert "make seeds" in metrics["seeds"]["reason"]
 
 
 def _check_proposals(metrics, trials, n_proposals, n_pairs):
