@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 UV_VERSION := $(shell sed -n 's/^uv==//p' requirements.lock)
 
-.PHONY: env lock repro test bench review seeds mutation train-diagnostics clean-env
+.PHONY: env lock repro test bench review seeds val-sim mutation train-diagnostics clean-env
 
 env: $(STAMP)
 
@@ -94,6 +94,13 @@ seeds: $(STAMP)
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python -m tools.seed_sweep
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro sim_eval
 	$(BIN)/python -m tools.docs_results
+
+val-sim: $(STAMP)
+	@# the learned methods hang the training objects on the validation supports in
+	@# simulation (decisions on hang rates without the test set): data/val_sim/val_sim.json;
+	@# needs the artifacts of `make repro`. Other methods or models: ARGS='--methods sctdn
+	@# template_only --model sctdn=DIR'
+	$(BIN)/python -m tools.val_sim $(ARGS)
 
 train-diagnostics: $(STAMP)
 	@# short seeded SCTDN runs (overfit one batch, learning curve, contact term, train vs

@@ -55,12 +55,15 @@ class TestObject:
 
 
 def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_deg=(0.0,),
-                  grasp_yaws_deg=(0.0,)) -> tuple[list[TestSupport], list[TestObject], list[str]]:
+                  grasp_yaws_deg=(0.0,), support_split: str = "test", object_split: str = "test"
+                  ) -> tuple[list[TestSupport], list[TestObject], list[str]]:
     """(test supports with a ground-truth SKT, test objects, ids of test supports without).
 
     Each object carries its grasp candidates (:func:`skt_lib.sim.grasp.grasp_candidates`)
     for every yaw of ``grasp_yaws_deg`` × pitch of ``grasp_pitch_deg`` × roll of
-    ``grasp_rolls_deg`` (degrees; pass ``sim_eval``'s), in that order."""
+    ``grasp_rolls_deg`` (degrees; pass ``sim_eval``'s), in that order. ``support_split`` /
+    ``object_split``: the splits to take them from (Table I: both ``test``; validation in
+    simulation, :mod:`tools.val_sim`: ``val`` supports with ``train`` objects)."""
     pitches = (grasp_pitch_deg,) if np.isscalar(grasp_pitch_deg) else tuple(grasp_pitch_deg)
     mg = root / "mesh_gen"
     supports = read_table(mg / "supports.parquet", SUPPORTS)
@@ -71,7 +74,7 @@ def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_de
     stored = {sid: [resample(np.stack(k), T) for k in g["keypoints"]]
               for sid, g in skts.sort_values(["support_id", "skt_index"]).groupby("support_id")}
     test, missing = [], []
-    for s in supports[supports["split"] == "test"].itertuples():
+    for s in supports[supports["split"] == support_split].itertuples():
         if s.support_id not in stored:
             missing.append(s.support_id)
             continue
@@ -82,7 +85,7 @@ def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_de
                                 str(mg / s.mesh_path), gt, points[view].astype(np.float64), view,
                                 tuple(others)))
     objs = []
-    for o in objects[~objects["is_reference"] & (objects["split"] == "test")].itertuples():
+    for o in objects[~objects["is_reference"] & (objects["split"] == object_split)].itertuples():
         if o.object_id not in keypoints.index:
             continue  # no keypoint: rotation_extraction reports it
         kp = keypoints.loc[o.object_id]

@@ -1,0 +1,54 @@
+"""tools/val_sim.py: validation supports meet training objects in simulation; nothing of the
+test set is used."""
+
+import json
+
+import pandas as pd
+import pytest
+
+from tools.val_sim import main
+
+
+def test_validation_supports_meet_training_objects_only(tiny_evaluated, tmp_path):
+    params, data, _, _ = tiny_evaluated
+    out = tmp_path / "val_sim.json"
+    assert main(["--params", str(params), "--data-root", str(data), "--methods", "sctdn",
+                 "template_only", "--model", f"sctdn={data / 'train'}", "--out", str(out)]) == 0
+    got = json.loads(out.read_text())
+    supports = pd.read_parquet(data / "mesh_gen" / "supports.parquet").set_index("support_id")
+    objects = pd.read_parquet(data / "mesh_gen" / "objects.parquet").set_index("object_id")
+    pairs = [k.split("/") for k in got["outcomes"]["sctdn"]]
+    assert {supports.loc[s, "split"] for s, _ in pairs} == {"val"}
+    assert {objects.loc[o, "split"] for _, o in pairs} == {"train"}
+    assert not any(objects.loc[o, "is_reference"] for _, o in pairs)
+    assert len(pairs) == got["supports"] * got["objects"] > 0
+    assert got["outcomes"]["sctdn"].keys() == got["outcomes"]["template_only"].keys()
+    rate = sum(got["outcomes"]["sctdn"].values()) / len(pairs)
+    assert got["methods"]["sctdn"]["success"]["all"] == pytest.approx(rate)
+    c = got["paired"]["sctdn_vs_template_only"]
+    assert c["n_pairs"] == len(pairs)
+
+
+def test_a_model_override_must_name_a_model(capsys):
+    with pytest.raises(SystemExit):
+        main(["--model", "oracle=/tmp/x"])
+    assert "expected NAME=DIR" in capsys.readouterr().err
+
+
+def test_a_hang_taper_override_keeps_the_weights_and_moves_only_the_deformation(tiny_dataset):
+    import numpy as np
+
+    from skt_lib.learning.predictor import SktPredictor
+    from tools.val_sim import with_hang_taper
+
+    _, data, _ = tiny_dataset
+    base = SktPredictor.load(data / "train")
+    tapered = with_hang_taper(base, 3)
+    assert tapered.cfg.hang_taper == 3 and base.cfg.hang_taper == 0
+    cloud = np.load(data / "render_views" / sorted(p.name for p in (data / "render_views").iterdir()
+                                                    if p.suffix == ".npz")[0])["points"][0]
+    a, b = base.predict(cloud), tapered.predict(cloud)
+    template = base.predict(cloud, deform=False).positions
+    assert not np.allclose(a.positions[0], template[0], rtol=0, atol=1e-6)  # the model deforms
+    assert np.allclose(b.positions[0], template[0], rtol=0, atol=1e-9)  # tapered: the hang stays
+    assert np.allclose(a.positions[3:], b.positions[3:])  # past the taper: the same path

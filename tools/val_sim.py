@@ -1,0 +1,126 @@
+"""Validation in simulation (``make val-sim``, after ``make repro``): the learned methods hang
+the *training* objects on the *validation* supports with ``sim_eval``'s executor, grasps,
+physics and predicate, so that a choice about a method (a checkpoint, a setting, a model
+trained otherwise) can be taken on hang rates without touching the test set.
+
+Table I's trials pair test supports with test objects; here validation supports (their own
+seeded view, drawn as ``sim_eval`` draws a test support's) meet the training objects. The
+models are the pipeline's (``data/train``, ``data/train_baselines``) unless ``--model
+NAME=DIR`` names another directory for one of them (e.g. a scratch SCTDN trained with other
+settings). Writes a JSON (``--out``) with per method the success per level, its Wilson 95 %
+interval and failure reasons, exact McNemar tests of the first method against every
+other on the same (support, object) pairs, and every pair's outcome (``outcomes``:
+``{method: {"<support_id>/<object_id>": bool}}``, to pair two runs). Nothing under the data
+root or ``reports/`` changes.
+"""
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from skt_lib.config import LEVELS, load_params
+from skt_lib.eval.methods import MODEL_OF, PROPOSING, load_models, make_method
+from skt_lib.eval.protocol import load_test_set, per_pair, predict_all, success_table, \
+    trial_settings
+from skt_lib.eval.rounds import run_rounds
+from skt_lib.eval.stats import paired_comparisons, success_ci95
+from skt_lib.io import write_json_atomic
+from skt_lib.learning.predictor import SktPredictor
+from skt_lib.learning.sctdn import Sctdn
+from skt_lib.learning.vatmart import VatMartPredictor
+from skt_lib.seeding import item_rng
+from skt_lib.sim.execute import REASONS, run_trial
+from stages._common import run_items
+
+
+def _model_override(text: str) -> tuple[str, Path]:
+    name, sep, directory = text.partition("=")
+    if not sep or name not in set(MODEL_OF.values()):
+        raise argparse.ArgumentTypeError(f"expected NAME=DIR with NAME one of "
+                                         f"{sorted(set(MODEL_OF.values()))}, got {text!r}")
+    return name, Path(directory)
+
+
+def with_hang_taper(predictor: SktPredictor, n: int) -> SktPredictor:
+    """``predictor``'s weights with the deformation faded in over ``n`` waypoints from the
+    hang (:class:`~skt_lib.learning.sctdn.SctdnConfig` ``hang_taper``)."""
+    model = Sctdn(replace(predictor.cfg, hang_taper=n), predictor.model.templates)
+    model.load_state_dict(predictor.model.state_dict())
+    return SktPredictor(model)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="tools/val_sim.py", description=__doc__.splitlines()[0])
+    ap.add_argument("--params", default="params.yaml", type=Path)
+    ap.add_argument("--data-root", default="data", type=Path)
+    ap.add_argument("--methods", nargs="+", default=["sctdn", "template_only"],
+                    choices=sorted(MODEL_OF), help="the first is compared with each other")
+    ap.add_argument("--model", action="append", default=[], type=_model_override,
+                    metavar="NAME=DIR", help="load model NAME (sctdn, vatmart, …) from DIR")
+    ap.add_argument("--hang-taper", type=int, default=None, metavar="N",
+                    help="run the SCTDN models with this hang taper instead of their own "
+                         "(train.hang_taper_waypoints; the same weights)")
+    ap.add_argument("--out", default=Path("data/val_sim/val_sim.json"), type=Path)
+    args = ap.parse_args(argv)
+    params = load_params(args.params)
+    p, T, seed = params.sim_eval, params.clustering.T, params.common.seed
+    supports, objects, missing = load_test_set(args.data_root, T, seed, p.grasp_pitch_deg,
+                                                p.grasp_rolls_deg, p.grasp_yaws_deg,
+                                                support_split="val", object_split="train")
+    if not supports or not objects:
+        print(f"ERROR: {args.data_root}: no validation supports with an SKT or no training "
+              "objects", file=sys.stderr)
+        return 2
+    models = load_models(args.data_root, args.methods, T)
+    for name, directory in args.model:
+        models[name] = (VatMartPredictor if name in PROPOSING else SktPredictor).load(directory)
+    if args.hang_taper is not None:
+        models = {name: with_hang_taper(m, args.hang_taper) if isinstance(m, SktPredictor) else m
+                  for name, m in models.items()}
+    pre = np.asarray(p.kpam_pre_hang_m, float)
+
+    def make(m: str, s):
+        return make_method(m, models.get(MODEL_OF[m]), s.gt, pre, p.kpam_lift_m,
+                           rng=item_rng(seed, f"val_sim/{m}", s.support_id),
+                           n_proposals=p.n_proposals)
+
+    positions, _, _ = predict_all({m: (lambda s, m=m: make(m, s)) for m in args.methods},
+                                  supports)
+
+    def run(tasks, label):
+        results, _, crashes = run_items(run_trial, tasks, params.compute, label)
+        if crashes:
+            raise RuntimeError(f"{len(crashes)} trials crashed, first: {crashes[0][0].trial_id}: "
+                               f"{crashes[0][1]}")
+        return results
+
+    rows, _ = run_rounds(args.methods, supports, objects, positions,
+                         trial_settings(p, params.contact_sim), run)
+    pairs = per_pair(pd.DataFrame(rows))
+    table, ci = success_table(pairs), success_ci95(pairs, LEVELS)
+    out = {"supports": len(supports), "supports_without_skt": missing, "objects": len(objects),
+           "models": {name: str(d) for name, d in args.model}, "hang_taper": args.hang_taper,
+           "methods": {m: {"success": table[m], "success_ci95": ci[m],
+                           "failures_by_reason": {r: int((g["failure_reason"] == r).sum())
+                                                  for r in REASONS}}
+                       for m, g in pairs.groupby("method", sort=False)},
+           "paired": paired_comparisons(pairs, args.methods[0]),
+           "outcomes": {m: {f"{r.support_id}/{r.object_id}": bool(r.success)
+                            for r in g.itertuples()}
+                        for m, g in pairs.groupby("method", sort=False)}}
+    write_json_atomic(args.out, out)
+    for m, v in out["methods"].items():
+        print(f"{m:>22}: " + "  ".join(f"{k} {100 * x:.1f}" for k, x in v["success"].items()
+                                       if x is not None))
+    for k, c in out["paired"].items():
+        print(f"{k}: {c['n_a_only']} / {c['n_b_only']} discordant, p = {c['p_value']:.3g}")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
