@@ -232,6 +232,7 @@ class TrainParams(_Section):
     feat_dim: int = Field(ge=8, le=1024, description="Per-point feature width (affordance head and shape feature).")
     lstm_hidden: int = Field(ge=8, le=1024, description="Deformation LSTM hidden width (paper: 256).")
     contact_weight: float = Field(ge=0.0, le=100.0, description="Weight of the contact cross-entropy L_p (not in the paper; 0 switches it off).")
+    hang_taper_waypoints: int = Field(ge=0, le=1000, description="Waypoints over which the deformation fades in from the hang: offset i is scaled by min(1, i / this), so ξ_0 stays at the predicted contact (not in the paper; 0: deform every waypoint; must be < clustering.T).")
     threads: int = Field(ge=1, le=256, description="Torch CPU threads while training (fixed, not the core count: float sums depend on it, so the same value gives the same weights on any machine).")
 
 

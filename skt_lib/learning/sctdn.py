@@ -36,10 +36,15 @@ class SctdnConfig:
     centres: tuple[int, int, int] | None = None  # set-abstraction centres per level (None: N/4, N/16, N/64)
     nsample: int = 16  # neighbours grouped per centre
     condition: str = "shape"  # "shape" | "contact_point": the deformation's conditioning feature
+    # waypoints over which the deformation fades in from the hang: offset i is scaled by
+    # min(1, i / hang_taper), so ξ_0 stays at the contact (0: no taper, the paper's)
+    hang_taper: int = 0
 
     def __post_init__(self):
         if self.condition not in CONDITIONS:
             raise ValueError(f"condition: expected one of {CONDITIONS}, got {self.condition!r}")
+        if not 0 <= self.hang_taper < self.T:
+            raise ValueError(f"hang_taper: need 0 ≤ hang_taper < T = {self.T}, got {self.hang_taper}")
         n = self.n_points
         centres = self.centres or (max(n // 4, 3), max(n // 16, 3), max(n // 64, 3))
         object.__setattr__(self, "centres", tuple(int(c) for c in centres))
@@ -52,7 +57,9 @@ class SctdnConfig:
 
     @classmethod
     def from_json(cls, text: str) -> "SctdnConfig":
-        return cls(**json.loads(text))
+        data = json.loads(text)
+        data.setdefault("hang_taper", 0)  # models saved before the taper deform every waypoint
+        return cls(**data)
 
 
 class Sctdn(nn.Module):
@@ -71,6 +78,8 @@ class Sctdn(nn.Module):
         self.offset = nn.Linear(cfg.lstm_hidden, 3)
         nn.init.zeros_(self.offset.weight)  # start as the aligned template: deform from there
         nn.init.zeros_(self.offset.bias)
+        ramp = torch.clamp(torch.arange(cfg.T, dtype=torch.float32) / max(cfg.hang_taper, 1), max=1.0)
+        self.register_buffer("taper", ramp[None, :, None], persistent=False)
 
     def forward(self, xyz_n, scale, family=None, contact_n=None) -> dict[str, torch.Tensor]:
         """``xyz_n (B, N, 3)``, ``scale (B,)``; ``family (B,)`` and ``contact_n (B, 3)`` given
@@ -89,7 +98,10 @@ class Sctdn(nn.Module):
         else:
             shape = feature_at(feats, xyz_n, contact_n)
         x = torch.cat([self.wp_mlp(aligned), shape[:, None].expand(-1, aligned.shape[1], -1)], -1)
-        traj = aligned + self.offset(self.lstm(x)[0])
+        offset = self.offset(self.lstm(x)[0])
+        if self.cfg.hang_taper:
+            offset = offset * self.taper
+        traj = aligned + offset
         return {"logits": logits, "affordance": aff, "affordance_logits": aff_logits,
                 "aligned": aligned, "trajectory": traj}
 

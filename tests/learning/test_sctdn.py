@@ -56,6 +56,23 @@ def test_starts_at_the_template_and_rejects_bad_templates():
         Sctdn(cfg, torch.zeros(3, 8, 3))
 
 
+def test_the_hang_taper_keeps_the_hang_at_the_contact_and_deforms_beyond_it():
+    b = make_batch([(s, 0) for s in _supports()])
+    outs = {}
+    for n in (0, 3):
+        torch.manual_seed(0)
+        model = Sctdn(SctdnConfig(k=2, T=8, n_points=256, hang_taper=n), torch.zeros(2, 8, 3))
+        torch.nn.init.normal_(model.offset.bias)  # a deformation that is not zero
+        outs[n] = model.eval()(b["xyz"], b["scale"], b["family"], b["contact"])
+    free, tapered = (outs[n]["trajectory"] - outs[n]["aligned"] for n in (0, 3))
+    assert (free.norm(dim=-1) > 0.1).all()  # untapered: every waypoint moves, ξ_0 too
+    assert torch.equal(tapered[:, 0], torch.zeros_like(tapered[:, 0]))  # ξ_0: at the contact
+    assert torch.allclose(tapered[:, 1:3], free[:, 1:3] * torch.tensor([1 / 3, 2 / 3])[:, None])
+    assert torch.equal(tapered[:, 3:], free[:, 3:])  # past the taper: the same deformation
+    with pytest.raises(ValueError, match="hang_taper"):
+        SctdnConfig(k=2, T=8, hang_taper=8)
+
+
 def test_predictor_roundtrip_and_input_checks(tmp_path):
     cfg = SctdnConfig(k=2, T=8, n_points=256)
     with torch.random.fork_rng():
