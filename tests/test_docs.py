@@ -235,6 +235,22 @@ def test_table_one_formats():
                     "| `zeta` | 50.0 | – | 100.0 | 0.0 | 12.5 |"]
 
 
+def test_table_one_adds_the_seed_spread_or_says_why_not():
+    rates = {"all": 0.5, "easy": None, "normal": 1.0, "hard": 0.0, "very_hard": 0.25}
+    metrics = {"sctdn": {"success": rates},
+               "seeds": {"status": "ok", "seeds": [7, 8, 9],
+                         "sctdn": {"success_mean": rates,
+                                   "success_min": {**rates, "all": 0.4},
+                                   "success_max": {**rates, "all": 0.61}},
+                         "paper_orderings": []}}
+    table = docs_results.table_one(metrics)
+    assert "training seeds 7, 8, 9" in table
+    assert "| `sctdn` | 50.0 [40.0–61.0] | – | 100.0 [100.0–100.0] |" in table
+    metrics["seeds"] = {"status": "stale", "reason": "made from other inputs"}
+    assert "Over training seeds: not merged (made from other inputs)." in docs_results.table_one(
+        metrics)
+
+
 def test_check_fails_on_an_edited_figure_and_the_tool_repairs_it(tmp_path, capsys):
     for rel in ("README.md", "docs/presets.md", docs_results.METRICS, docs_results.BENCH,
                 docs_results.SCALING):

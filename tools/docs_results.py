@@ -103,6 +103,20 @@ def table_one(metrics: dict) -> str:
     for m in table_methods(metrics):
         success = metrics[m]["success"]
         lines.append(f"| `{m}` | " + " | ".join(_pct(success.get(k)) for k, _ in LEVELS) + " |")
+    seeds = metrics.get("seeds")
+    if seeds and seeds.get("status") == "ok":
+        lines += ["", f"The learned methods over training seeds {', '.join(map(str, seeds['seeds']))} "
+                  "(`make seeds`; same data and trials), success % mean [min–max]:", "",
+                  "| method | " + " | ".join(title for _, title in LEVELS) + " |",
+                  "|---" * (len(LEVELS) + 1) + "|"]
+        for m, b in seeds.items():
+            if isinstance(b, dict) and "success_mean" in b:
+                lines.append(f"| `{m}` | " + " | ".join(
+                    "–" if b["success_mean"][k] is None else
+                    f"{_pct(b['success_mean'][k])} [{_pct(b['success_min'][k])}–"
+                    f"{_pct(b['success_max'][k])}]" for k, _ in LEVELS) + " |")
+    elif seeds:
+        lines += ["", f"Over training seeds: not merged ({seeds['reason']})."]
     return "\n".join(lines)
 
 
