@@ -65,13 +65,15 @@ def inputs_key(repo: Path) -> str:
     deps = yaml.safe_load(dvc_yaml.read_text())["stages"]["sim_eval"]["deps"] \
         if dvc_yaml.is_file() else []
     for dep in sorted(deps):
-        if dep.startswith(("data/", "reports/")) or dep.startswith(REPORTING_ONLY):
+        if dep.startswith(("data/", "reports/")):
             continue
         path = repo / dep
         files = sorted(p for p in path.rglob("*") if p.is_file() and "__pycache__" not in p.parts) \
             if path.is_dir() else [path]
-        for f in files:
-            h.update(str(f.relative_to(repo)).encode() + b"\0" + f.read_bytes())
+        for f in files:  # per file: a directory dependency holds reporting modules too
+            rel = f.relative_to(repo).as_posix()
+            if not rel.startswith(REPORTING_ONLY):
+                h.update(rel.encode() + b"\0" + f.read_bytes())
     return h.hexdigest()
 
 
@@ -97,14 +99,16 @@ def runs_document(key: str, pairs_by_seed: dict[int, pd.DataFrame]) -> dict:
 
 def seed_block(pairs: pd.DataFrame, base_seed: int, runs_path: Path, repo: Path) -> dict:
     """``metrics["seeds"]``: this run's pairs (``common.seed``) with the extra seeds of
-    ``runs_path``, merged when its key is :func:`inputs_key` of ``repo``. Per learned method present in both, ``success_mean`` / ``success_min`` /
-    ``success_max`` / ``success_per_seed`` per level and ``all`` (proposing methods also the
+    ``runs_path``, merged when its key is :func:`inputs_key` of ``repo``. Per learned method
+    present in both, ``success_mean`` / ``success_min`` / ``success_max`` /
+    ``success_per_seed`` per level and ``all`` (proposing methods also the
     same for their first proposal, ``success_single_*``), and ``paper_orderings`` judged on
     the mean over seeds with each seed's McNemar test and a bootstrap-over-supports interval
     of the mean difference. ``{"status": "missing" | "stale", "reason"}`` when the file
     cannot be merged."""
+    name = f"{runs_path.parent.name}/{runs_path.name}"  # metrics carry no machine's paths
     if not runs_path.is_file():
-        return {"status": "missing", "reason": f"{runs_path}: not found; run `make seeds`"}
+        return {"status": "missing", "reason": f"no {name}; run `make seeds`"}
     try:
         doc = json.loads(runs_path.read_text())
         if doc.get("format") != FORMAT:
@@ -119,13 +123,13 @@ def seed_block(pairs: pd.DataFrame, base_seed: int, runs_path: Path, repo: Path)
     except (ValueError, KeyError, TypeError, AttributeError) as e:
         raise DataError(f"{runs_path}: not a seed runs file: {e}") from e
     if key != inputs_key(repo):
-        return {"status": "stale", "reason": f"{runs_path} was made from other inputs (data, "
+        return {"status": "stale", "reason": f"{name} was made from other inputs (data, "
                 "code or params); run `make seeds`"}
     methods = [m for m in dict.fromkeys(pairs["method"]) if _base(m) in SEEDED
                and all(m in runs for runs in extra.values())]
     if not methods or any(set(_pair_ids(pairs[pairs["method"] == m])) != set(listed)
                           for m in methods):
-        return {"status": "stale", "reason": f"{runs_path}: other (support, object) pairs or "
+        return {"status": "stale", "reason": f"{name}: other (support, object) pairs or "
                 "methods than this run's; run `make seeds`"}
     if base_seed in extra:
         raise DataError(f"{runs_path}: holds common.seed {base_seed}, which this run trains")

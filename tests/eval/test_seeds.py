@@ -22,11 +22,12 @@ def _repo(tmp_path):
     for path, text in {"params.yaml": "common: {seed: 7}\n",
                        "skt_lib/sim/execute.py": "A = 1\n", "stages/sim_eval.py": "run()\n",
                        "viz/report.py": "pretty()\n", "skt_lib/eval/report.py": "table()\n",
+                       "skt_lib/eval/methods.py": "sctdn()\n", "skt_lib/eval/seeds.py": "merge()\n",
                        "data/views/v.npz": "cloud"}.items():
         (repo / path).parent.mkdir(parents=True, exist_ok=True)
         (repo / path).write_text(text)
     (repo / "dvc.yaml").write_text(yaml.safe_dump({"stages": {"sim_eval": {"deps": [
-        "stages/sim_eval.py", "skt_lib/sim", "viz/report.py", "skt_lib/eval/report.py",
+        "stages/sim_eval.py", "skt_lib/sim", "viz/report.py", "skt_lib/eval",
         "data/views", "reports/seeds/seed_runs.json"]}}}))
     _lock(repo, views="v1", train_outs="m1", train_deps="c1", sim_eval="e1")
     return repo
@@ -45,7 +46,8 @@ def test_the_key_follows_data_code_and_params_but_not_models_reports_or_its_own_
     key = inputs_key(repo)
     _lock(repo, views="v1", train_outs="m2", train_deps="c1", sim_eval="e2")
     (repo / "viz/report.py").write_text("prettier()\n")
-    (repo / "skt_lib/eval/report.py").write_text("wider_table()\n")
+    (repo / "skt_lib/eval/report.py").write_text("wider_table()\n")  # in a directory dep
+    (repo / "skt_lib/eval/seeds.py").write_text("merge_better()\n")
     (repo / "data/views/v.npz").write_text("another cloud")  # read through the lock only
     assert inputs_key(repo) == key  # the base seed's models, sim_eval's stale entry, reports
 
@@ -53,9 +55,11 @@ def test_the_key_follows_data_code_and_params_but_not_models_reports_or_its_own_
                lambda: _lock(repo, views="v2", train_outs="m2", train_deps="c2", sim_eval="e2"),
                lambda: (repo / "skt_lib/sim/new.py").write_text("B = 2\n"),
                lambda: (repo / "stages/sim_eval.py").write_text("run(faster=True)\n"),
+               lambda: (repo / "skt_lib/eval/methods.py").write_text("sctdn(v=2)\n"),
                lambda: (repo / "params.yaml").write_text("common: {seed: 8}\n")]
     seen = {key}
-    for change in changes:  # data, training code, trial code (a file added), the stage, params
+    for change in changes:  # data, training code, trial code (a file added), the stage,
+        # trial code beside reporting code in one directory, params
         change()
         seen.add(inputs_key(repo))
     assert len(seen) == len(changes) + 1
