@@ -9,7 +9,7 @@ from skt_lib.config import load_params
 from skt_lib.geometry.se3 import pose_matrix, skt_rotation
 from skt_lib.io import read_table
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
-from skt_lib.sim.contact_sim import arm_site, perturbation
+from skt_lib.sim.contact_sim import HangTask, arm_site, perturbation, release_pose
 from skt_lib.sim.hanging import check_hang, perturb
 from skt_lib.sim.keypoints import keypoint_from_hang, orthonormality_error
 from skt_lib.sim.world import World
@@ -102,6 +102,22 @@ def test_arm_site_walks_along_the_polyline():
     assert p == pytest.approx([0.1, 0, 0.03]) and t == pytest.approx([0, 0, 1])
     p, _ = arm_site(arm, np.array([0.05, 0, 0]), -1.0)  # clipped at the wall end
     assert p == pytest.approx([0, 0, 0])
+
+
+def test_release_site_starts_at_the_hang_point_and_widens_only_when_redrawn():
+    """A drop's first release is at the hang point (a random site made the contact label
+    random along a straight peg); redraws move along the arm, at most slide_noise_m × the
+    attempt's share of max_init_tries."""
+    p = load_params("params.yaml").contact_sim
+    task = HangTask("s", "reference_on_support", "o", "", 0.0, "s", "", ((0.0, 0.0, 0.0), (0.2, 0.0, 0.0)),
+                    (0.1, 0.0, 0.0), 0.004, 0, p)
+    rng = np.random.default_rng(0)
+    for attempt in (0, 1, p.max_init_tries // 2, p.max_init_tries - 1):
+        along = np.array([release_pose(rng, task, attempt)[0, 3] - 0.1 for _ in range(200)])
+        reach = p.slide_noise_m * attempt / (p.max_init_tries - 1)
+        assert np.abs(along).max() <= reach + 1e-12
+        assert np.abs(along).max() >= 0.9 * reach  # and it does use the room it has
+    assert np.abs(along).max() >= 0.9 * p.slide_noise_m
 
 
 def test_keypoint_rule_on_known_poses():
