@@ -18,7 +18,7 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
 from skt_lib.io import read_table, write_table
 from skt_lib.schemas import CONTACTS, OBJECTS, SUPPORTS
-from skt_lib.sim.contact_sim import ROD_ARM, ROD_SITE, HangTask, simulate_hangs
+from skt_lib.sim.contact_sim import ROD_ARM, ROD_SITE, HangTask, reference_task, simulate_hangs
 from stages._common import item_store, parse_args, run_items
 from viz.contact_sim_report import log_hangs, write_report
 from viz.report import write_metrics, write_run_log
@@ -38,10 +38,7 @@ def main(argv=None) -> int:
     obj_tasks = [HangTask(o.object_id, "object_on_rod", o.object_id, str(src / o.urdf_path),
                           o.aperture_clearance_m, "", "", ROD_ARM, ROD_SITE, p.rod_radius_m, seed, p)
                  for o in objects.itertuples()]
-    sup_tasks = [HangTask(s.support_id, "reference_on_support", ref.object_id, str(src / ref.urdf_path),
-                          ref.aperture_clearance_m, s.support_id, str(src / s.urdf_path),
-                          tuple(map(tuple, s.arm_centreline)), tuple(s.hang_point), s.radius_m, seed, p)
-                 for s in supports.itertuples()]
+    sup_tasks = [reference_task(s, ref, src, seed, p) for s in supports.itertuples()]
     work = item_store(args)
     t0 = time.perf_counter()
     obj_rows, obj_fail, obj_failed = run_items(simulate_hangs, obj_tasks, params.compute,

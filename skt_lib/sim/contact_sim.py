@@ -17,6 +17,7 @@ checked to survive the perturbation again from rest.
 
 from collections import Counter
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pybullet as pb
@@ -103,8 +104,8 @@ def release_pose(rng: np.random.Generator, task: HangTask, attempt: int = 0) -> 
     first draw of a drop releases at the hang point itself, and the site moves away along
     the arm only as far as it takes to find a clear release (where the aperture does not fit
     at the hang point). Released anywhere along a straight peg, the reference stays where it
-    was dropped, so a site drawn at random made the contact label random along the arm (8 mm
-    median, up to 45 mm, between two seeds on the easy validation supports: docs/pipeline.md).
+    was dropped, so a site drawn at random made the contact label random along the arm
+    (docs/pipeline.md: a median 8 mm between drop seeds on the easy validation supports).
     At the site the aperture axis (object +x) lies along the arm and object +z is
     perpendicular to it in the vertical plane; then a random roll about the axis and a random
     small tilt."""
@@ -123,6 +124,16 @@ def release_pose(rng: np.random.Generator, task: HangTask, attempt: int = 0) -> 
     out = np.eye(4)
     out[:3, :3], out[:3, 3] = rot, site + n * drop
     return out
+
+
+def reference_task(support, ref, src: Path, seed: int, p: ContactSimParams) -> HangTask:
+    """The ``reference_on_support`` run of the reference object ``ref`` (a row of the objects
+    table) on ``support`` (a row of the supports table); ``src``: the mesh_gen folder their
+    paths are relative to."""
+    return HangTask(support.support_id, "reference_on_support", ref.object_id,
+                    str(src / ref.urdf_path), ref.aperture_clearance_m, support.support_id,
+                    str(src / support.urdf_path), tuple(map(tuple, support.arm_centreline)),
+                    tuple(support.hang_point), support.radius_m, seed, p)
 
 
 def _clear(world: World, obj: int, others: list[int], clearance: float) -> bool:
