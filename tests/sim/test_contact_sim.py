@@ -1,6 +1,7 @@
 """contact_sim and rotation_extraction on the tiny dataset."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -108,7 +109,7 @@ def test_release_site_starts_at_the_hang_point_and_widens_only_when_redrawn():
     """A drop's first release is at the hang point (a random site made the contact label
     random along a straight peg); redraws move along the arm, at most slide_noise_m × the
     attempt's share of max_init_tries."""
-    p = load_params("params.yaml").contact_sim
+    p = load_params(Path(__file__).resolve().parents[2] / "params.yaml").contact_sim  # the committed one
     task = HangTask("s", "reference_on_support", "o", "", 0.0, "s", "", ((0.0, 0.0, 0.0), (0.2, 0.0, 0.0)),
                     (0.1, 0.0, 0.0), 0.004, 0, p)
     rng = np.random.default_rng(0)
