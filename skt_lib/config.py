@@ -233,6 +233,7 @@ class TrainParams(_Section):
     lstm_hidden: int = Field(ge=8, le=1024, description="Deformation LSTM hidden width (paper: 256).")
     contact_weight: float = Field(ge=0.0, le=100.0, description="Weight of the contact cross-entropy L_p (not in the paper; 0 switches it off).")
     hang_taper_waypoints: int = Field(ge=0, le=1000, description="Waypoints over which the deformation fades in from the hang: offset i is scaled by min(1, i / this), so ξ_0 stays at the predicted contact (not in the paper; 0: deform every waypoint; must be < clustering.T).")
+    check_families: int = Field(ge=0, le=100, description="SCTDN read-out (not in the paper): 0 returns the classifier's family, deformed; n ≥ 1 offers the deformed SKT and the aligned template of each of the n most probable families and returns the one whose reference ring cuts least into the input cloud (skt_lib.learning.cloud_check; must be ≤ clustering.k).")
     threads: int = Field(ge=1, le=256, description="Torch CPU threads while training (fixed, not the core count: float sums depend on it, so the same value gives the same weights on any machine).")
 
 

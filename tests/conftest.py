@@ -26,7 +26,7 @@ TINY = {
     "render_views": {'n_azimuth': 7, 'n_elevation': 6, 'azimuth_deg': [-60.0, 60.0], 'elevation_deg': [-20.0, 55.0], 'distance_m': 0.35, 'fov_deg': 40.0, 'width': 320, 'height': 240, 'n_points': 1000, 'noise_std_m': 0.0},
     "affordance_maps": {'sigma_m': 0.005, 'alpha': 0.5, 'beta': 0.5, 'hanging_part_m': 0.03, 'visible_tol_m': 0.005},
     "clustering": {'T': 10, 'k': 3, 'n_init': 10, 'max_iter': 300},
-    "train": {'epochs': 1, 'views_per_epoch': 1, 'batch_size': 16, 'lr': 0.001, 'lr_final_ratio': 0.05, 'weight_decay': 0.0001, 'val_views': [0], 'centres': [128, 32, 8], 'nsample': 16, 'feat_dim': 64, 'lstm_hidden': 64, 'contact_weight': 0.1, 'hang_taper_waypoints': 0, 'threads': 1},
+    "train": {'epochs': 1, 'views_per_epoch': 1, 'batch_size': 16, 'lr': 0.001, 'lr_final_ratio': 0.05, 'weight_decay': 0.0001, 'val_views': [0], 'centres': [128, 32, 8], 'nsample': 16, 'feat_dim': 64, 'lstm_hidden': 64, 'contact_weight': 0.1, 'hang_taper_waypoints': 0, 'check_families': 0, 'threads': 1},
     "train_baselines": {"models": ["sctdn_cp_feature", "vatmart", "vatmart_mod"], "latent_dim": 16,
                         "hidden": 64, "n_control_points": 4, "vatmart_kl_weight": 0.1, "vatmart_mod_kl_weight": 0.01},
     "sim_eval": {"methods": ["oracle", "oracle_floating", "template_only", "sctdn", "kpam",

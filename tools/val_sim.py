@@ -45,10 +45,12 @@ def _model_override(text: str) -> tuple[str, Path]:
     return name, Path(directory)
 
 
-def with_hang_taper(predictor: SktPredictor, n: int) -> SktPredictor:
-    """``predictor``'s weights with the deformation faded in over ``n`` waypoints from the
-    hang (:class:`~skt_lib.learning.sctdn.SctdnConfig` ``hang_taper``)."""
-    model = Sctdn(replace(predictor.cfg, hang_taper=n), predictor.model.templates)
+def with_readout(predictor: SktPredictor, **changes) -> SktPredictor:
+    """``predictor``'s weights with other read-out settings of
+    :class:`~skt_lib.learning.sctdn.SctdnConfig` (``hang_taper``: the deformation faded in
+    over that many waypoints from the hang; ``check_families``: the cloud check's
+    candidates)."""
+    model = Sctdn(replace(predictor.cfg, **changes), predictor.model.templates)
     model.load_state_dict(predictor.model.state_dict())
     return SktPredictor(model)
 
@@ -64,6 +66,9 @@ def main(argv=None) -> int:
     ap.add_argument("--hang-taper", type=int, default=None, metavar="N",
                     help="run the SCTDN models with this hang taper instead of their own "
                          "(train.hang_taper_waypoints; the same weights)")
+    ap.add_argument("--check-families", type=int, default=None, metavar="N",
+                    help="run the SCTDN models with this many families in the cloud check "
+                         "instead of their own (train.check_families; the same weights)")
     ap.add_argument("--out", default=Path("data/val_sim/val_sim.json"), type=Path)
     args = ap.parse_args(argv)
     params = load_params(args.params)
@@ -78,8 +83,10 @@ def main(argv=None) -> int:
     models = load_models(args.data_root, args.methods, T)
     for name, directory in args.model:
         models[name] = (VatMartPredictor if name in PROPOSING else SktPredictor).load(directory)
-    if args.hang_taper is not None:
-        models = {name: with_hang_taper(m, args.hang_taper) if isinstance(m, SktPredictor) else m
+    readout = {k: v for k, v in (("hang_taper", args.hang_taper),
+                                 ("check_families", args.check_families)) if v is not None}
+    if readout:
+        models = {name: with_readout(m, **readout) if isinstance(m, SktPredictor) else m
                   for name, m in models.items()}
     pre = np.asarray(p.kpam_pre_hang_m, float)
 
@@ -104,6 +111,7 @@ def main(argv=None) -> int:
     table, ci = success_table(pairs), success_ci95(pairs, LEVELS)
     out = {"supports": len(supports), "supports_without_skt": missing, "objects": len(objects),
            "models": {name: str(d) for name, d in args.model}, "hang_taper": args.hang_taper,
+           "check_families": args.check_families,
            "methods": {m: {"success": table[m], "success_ci95": ci[m],
                            "failures_by_reason": {r: int((g["failure_reason"] == r).sum())
                                                   for r in REASONS}}

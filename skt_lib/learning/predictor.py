@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from skt_lib.errors import DataError
+from skt_lib.learning.cloud_check import clearest
 from skt_lib.learning.data import normalise
 from skt_lib.learning.sctdn import Sctdn, SctdnConfig
 from skt_lib.perception.pointcloud import check_cloud, farthest_point_sample
@@ -66,17 +67,33 @@ class SktPredictor:
     @torch.inference_mode()
     def predict(self, points: np.ndarray, deform: bool = True) -> Skt:
         """The SKT for a cloud ``(N, 3)``; ``deform=False`` returns the predicted family's
-        template aligned at the predicted contact point (the paper's template-only row)."""
+        template aligned at the predicted contact point (the paper's template-only row).
+
+        With ``cfg.check_families = n ≥ 1`` (and ``deform``), the deformed SKT and the aligned
+        template of each of the ``n`` most probable families are candidates, in that order,
+        and the one whose reference ring cuts least into ``points`` is returned
+        (:func:`skt_lib.learning.cloud_check.clearest`); its ``family`` and
+        ``family_probability`` are that candidate's."""
         pts = check_cloud(points, "points")
         if len(pts) != self.cfg.n_points:
             if len(pts) < self.cfg.n_points:
                 raise ValueError(f"points: need at least {self.cfg.n_points}, got {len(pts)}")
             pts = pts[farthest_point_sample(pts, self.cfg.n_points)]
         xyz_n, c, s = normalise(pts)
-        out = self.model(torch.as_tensor(xyz_n[None], dtype=torch.float32),
-                         torch.as_tensor([s], dtype=torch.float32))
-        positions = out["trajectory" if deform else "aligned"][0].double().numpy() * s + c
+        x = torch.as_tensor(xyz_n[None], dtype=torch.float32)
+        scale = torch.as_tensor([s], dtype=torch.float32)
+        if deform and self.cfg.check_families:
+            out = self.model.family_candidates(x, scale, self.cfg.check_families)
+            kinds = np.stack([out["trajectory"].double().numpy(), out["aligned"].double().numpy()],
+                             1) * s + c  # (n, 2, T, 3): deformed, then template, per family
+            pick, _ = clearest(list(kinds.reshape(-1, *kinds.shape[2:])), pts)
+            family = int(out["families"][pick // 2])
+            positions = kinds[pick // 2, pick % 2]
+        else:
+            out = self.model(x, scale)
+            family = int(out["logits"][0].argmax())
+            positions = out["trajectory" if deform else "aligned"][0].double().numpy() * s + c
         aff = out["affordance"][0].numpy()
         probs = torch.softmax(out["logits"][0].double(), -1)
-        return Skt(positions, skt_frames(positions), int(out["logits"][0].argmax()),
-                   pts[int(aff.argmax())], aff, float(probs.max()))
+        return Skt(positions, skt_frames(positions), family, pts[int(aff.argmax())], aff,
+                   float(probs[family]))

@@ -39,10 +39,17 @@ class SctdnConfig:
     # waypoints over which the deformation fades in from the hang: offset i is scaled by
     # min(1, i / hang_taper), so ξ_0 stays at the contact (0: no taper, the paper's)
     hang_taper: int = 0
+    # read-out (not in the paper): 0 returns the classifier's family, deformed; n ≥ 1 offers
+    # the deformed SKT and the aligned template of each of the n most probable families and
+    # returns the one the input cloud says is clearest (skt_lib.learning.cloud_check)
+    check_families: int = 0
 
     def __post_init__(self):
         if self.condition not in CONDITIONS:
             raise ValueError(f"condition: expected one of {CONDITIONS}, got {self.condition!r}")
+        if not 0 <= self.check_families <= self.k:
+            raise ValueError(f"check_families: need 0 ≤ check_families ≤ k = {self.k}, "
+                             f"got {self.check_families}")
         if not 0 <= self.hang_taper < self.T:
             raise ValueError(f"hang_taper: need 0 ≤ hang_taper < T = {self.T}, got {self.hang_taper}")
         n = self.n_points
@@ -59,6 +66,7 @@ class SctdnConfig:
     def from_json(cls, text: str) -> "SctdnConfig":
         data = json.loads(text)
         data.setdefault("hang_taper", 0)  # models saved before the taper deform every waypoint
+        data.setdefault("check_families", 0)  # and before the cloud check read out the argmax
         return cls(**data)
 
 
@@ -92,6 +100,31 @@ class Sctdn(nn.Module):
             family = logits.argmax(-1)
         if contact_n is None:
             contact_n = xyz_n[torch.arange(len(xyz_n)), aff.argmax(-1)]
+        aligned, traj = self._deform(xyz_n, scale, feats, aff, family, contact_n)
+        return {"logits": logits, "affordance": aff, "affordance_logits": aff_logits,
+                "aligned": aligned, "trajectory": traj}
+
+    def family_candidates(self, xyz_n, scale, n: int) -> dict[str, torch.Tensor]:
+        """One cloud ``xyz_n (1, N, 3)``, ``scale (1,)``: the aligned template and the deformed
+        trajectory ``(n, T, 3)`` of each of the ``n`` most probable families (``families
+        (n,)``, most probable first), at the predicted contact; the encoder runs once."""
+        if len(xyz_n) != 1:
+            raise ValueError(f"xyz_n: one cloud at a time, got a batch of {len(xyz_n)}")
+        g, feats = backbone_features(self, xyz_n)
+        logits = self.cls_head(g)
+        aff_logits = self.aff_head(feats)[:, 0]
+        aff = torch.sigmoid(aff_logits)
+        families = torch.argsort(logits[0], descending=True, stable=True)[:n]
+        contact_n = xyz_n[0, aff[0].argmax()][None].expand(n, 3)
+        rep = (n, -1, -1)
+        aligned, traj = self._deform(xyz_n.expand(*rep), scale.expand(n), feats.expand(*rep),
+                                     aff.expand(n, -1), families, contact_n)
+        return {"logits": logits, "affordance": aff, "families": families,
+                "aligned": aligned, "trajectory": traj}
+
+    def _deform(self, xyz_n, scale, feats, aff, family, contact_n):
+        """(aligned template, deformed trajectory) ``(B, T, 3)`` of ``family (B,)`` at
+        ``contact_n (B, 3)``."""
         aligned = contact_n[:, None] + self.templates[family] / scale[:, None, None]
         if self.cfg.condition == "shape":
             shape = masked_max_pool(feats, aff, self.cfg.aff_threshold)
@@ -101,9 +134,7 @@ class Sctdn(nn.Module):
         offset = self.offset(self.lstm(x)[0])
         if self.cfg.hang_taper:
             offset = offset * self.taper
-        traj = aligned + offset
-        return {"logits": logits, "affordance": aff, "affordance_logits": aff_logits,
-                "aligned": aligned, "trajectory": traj}
+        return aligned, aligned + offset
 
 
 def add_backbone(module: nn.Module, centres, nsample: int, feat_dim: int) -> None:

@@ -30,7 +30,8 @@ class TrainSettings:
 def from_params(p, k: int, T: int, n_points: int) -> tuple[SctdnConfig, TrainSettings]:
     """The model config and loop settings of a ``train`` params section (TrainParams)."""
     cfg = SctdnConfig(k=k, T=T, n_points=n_points, feat_dim=p.feat_dim, lstm_hidden=p.lstm_hidden,
-                      centres=p.centres, nsample=p.nsample, hang_taper=p.hang_taper_waypoints)
+                      centres=p.centres, nsample=p.nsample, hang_taper=p.hang_taper_waypoints,
+                      check_families=p.check_families)
     return cfg, TrainSettings(p.epochs, p.views_per_epoch, p.batch_size, p.lr, p.lr_final_ratio,
                               p.weight_decay, tuple(p.val_views), p.contact_weight, p.threads)
 

@@ -39,11 +39,11 @@ def test_a_hang_taper_override_keeps_the_weights_and_moves_only_the_deformation(
     import numpy as np
 
     from skt_lib.learning.predictor import SktPredictor
-    from tools.val_sim import with_hang_taper
+    from tools.val_sim import with_readout
 
     _, data, _ = tiny_dataset
     base = SktPredictor.load(data / "train")
-    tapered = with_hang_taper(base, 3)
+    tapered = with_readout(base, hang_taper=3)
     assert tapered.cfg.hang_taper == 3 and base.cfg.hang_taper == 0
     cloud = np.load(data / "render_views" / sorted(p.name for p in (data / "render_views").iterdir()
                                                     if p.suffix == ".npz")[0])["points"][0]
