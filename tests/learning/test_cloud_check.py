@@ -104,6 +104,7 @@ def test_the_checked_read_out_returns_the_candidate_clearest_of_the_cloud():
     options = [cand[k][i].double().numpy() * s + c for i in range(2) for k in ("trajectory", "aligned")]
     scores = ring_penetrations(options, pts)
     best = int(np.argmin(scores))
+    assert best != 0 and scores[best] < scores[0]  # here the check overrules the classifier
     assert np.allclose(checked.positions, options[best])
     assert checked.family == int(cand["families"][best // 2])
     probs = torch.softmax(cand["logits"][0].double(), -1)
