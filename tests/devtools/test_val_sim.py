@@ -37,6 +37,7 @@ def test_a_model_override_must_name_a_model(capsys):
 
 def test_a_hang_taper_override_keeps_the_weights_and_moves_only_the_deformation(tiny_dataset):
     import numpy as np
+    import torch
 
     from skt_lib.learning.predictor import SktPredictor
     from tools.val_sim import with_readout
@@ -52,3 +53,10 @@ def test_a_hang_taper_override_keeps_the_weights_and_moves_only_the_deformation(
     assert not np.allclose(a.positions[0], template[0], rtol=0, atol=1e-6)  # the model deforms
     assert np.allclose(b.positions[0], template[0], rtol=0, atol=1e-9)  # tapered: the hang stays
     assert np.allclose(a.positions[3:], b.positions[3:])  # past the taper: the same path
+    # the cloud check's override: the same weights, the read-out picks among its candidates
+    checked = with_readout(base, check_families=1)
+    assert checked.cfg.check_families == 1 and base.cfg.check_families == 0
+    assert all(torch.equal(v, base.model.state_dict()[k])
+               for k, v in checked.model.state_dict().items())
+    c = checked.predict(cloud).positions
+    assert np.allclose(c, a.positions) or np.allclose(c, template)
