@@ -276,6 +276,8 @@ class SimEvalParams(_Section):
         min_length=1, description="Grasp candidates: the approach turned about keypoint +z from keypoint +x, degrees (90: from the side; outer loop of the order).")
     setup_clearance_m: float = Field(
         ge=0.0, le=0.02, description="Set-up: least robot–support, robot–wall and robot–object distance at the start pose, m.")
+    setup_fallbacks: int = Field(
+        ge=0, le=100, description="Set-up: how many of a checked learned method's other cloud-check candidates (sctdn, sctdn_cp_feature; clearest first) the Panda may run instead when no grasp follows its SKT; 0: the paper's protocol, a failed set-up ends the trial.")
     step_m: float = Field(gt=0.0, le=0.002, description="Max object-point motion per command (≤ 2 mm).")
     steps_per_command: int = Field(ge=1, le=100, description="Physics steps per joint command.")
     hold_steps: int = Field(ge=0, le=10000, description="Steps holding ξ_0 before the release.")

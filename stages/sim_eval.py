@@ -72,8 +72,9 @@ def main(argv=None) -> int:
                            n_proposals=p.n_proposals, omnihang=omni)
 
     extra_s, extra_o, user_md5 = load_user_items(root, params)
-    positions, seconds, made = predict_all({m: (lambda s, m=m: make(m, s)) for m in p.methods},
-                                           [*supports, *extra_s])
+    positions, seconds, made, fallbacks = predict_all(
+        {m: (lambda s, m=m: make(m, s)) for m in p.methods}, [*supports, *extra_s])
+    fallbacks = {key: f[:p.setup_fallbacks] for key, f in fallbacks.items()}
     settings = trial_settings(p, params.contact_sim)
     log.info("%d (method, test support, object) pairs: %d methods × %d test supports × %d "
              "objects; proposing methods run up to %d proposals per pair",
@@ -90,9 +91,9 @@ def main(argv=None) -> int:
         return results
 
     t0 = time.perf_counter()
-    rows, tasks = run_rounds(p.methods, supports, objects, positions, settings, run)
+    rows, tasks = run_rounds(p.methods, supports, objects, positions, settings, run, fallbacks)
     user_rows = run_user_trials(p.methods, supports, objects, extra_s, extra_o, positions,
-                                settings, run)
+                                settings, run, fallbacks)
     wall = time.perf_counter() - t0
     out.mkdir(parents=True, exist_ok=True)
     write_table(out / "trials.parquet", rows, TRIALS)
@@ -118,7 +119,7 @@ def main(argv=None) -> int:
 
     chosen = pick_rollouts(trials, p.n_record, p.methods)
     write_report(rep, trials, pairs, metrics, p.methods, supports, objects, missing, chosen)
-    replayed = replay(chosen, tasks, rows, supports, objects, settings, p.record_every,
+    replayed = replay(chosen, tasks, rows, settings, p.record_every,
                       lambda ts, label: run(ts, label, resumable=False))  # traces: not kept
     s_mesh = {s.support_id: s.mesh for s in supports}
     o_mesh = {o.object_id: o.mesh for o in objects}

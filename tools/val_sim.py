@@ -69,6 +69,9 @@ def main(argv=None) -> int:
     ap.add_argument("--check-families", type=int, default=None, metavar="N",
                     help="run the SCTDN models with this many families in the cloud check "
                          "instead of their own (train.check_families; the same weights)")
+    ap.add_argument("--setup-fallbacks", type=int, default=None, metavar="N",
+                    help="let the set-up fall back on this many of the cloud check's other "
+                         "candidates instead of sim_eval.setup_fallbacks")
     ap.add_argument("--out", default=Path("data/val_sim/val_sim.json"), type=Path)
     args = ap.parse_args(argv)
     params = load_params(args.params)
@@ -95,8 +98,10 @@ def main(argv=None) -> int:
                            rng=item_rng(seed, f"val_sim/{m}", s.support_id),
                            n_proposals=p.n_proposals)
 
-    positions, _, _ = predict_all({m: (lambda s, m=m: make(m, s)) for m in args.methods},
-                                  supports)
+    positions, _, _, fallbacks = predict_all(
+        {m: (lambda s, m=m: make(m, s)) for m in args.methods}, supports)
+    n_fallbacks = p.setup_fallbacks if args.setup_fallbacks is None else args.setup_fallbacks
+    fallbacks = {key: f[:n_fallbacks] for key, f in fallbacks.items()}
 
     def run(tasks, label):
         results, _, crashes = run_items(run_trial, tasks, params.compute, label)
@@ -106,12 +111,12 @@ def main(argv=None) -> int:
         return results
 
     rows, _ = run_rounds(args.methods, supports, objects, positions,
-                         trial_settings(p, params.contact_sim), run)
+                         trial_settings(p, params.contact_sim), run, fallbacks)
     pairs = per_pair(pd.DataFrame(rows))
     table, ci = success_table(pairs), success_ci95(pairs, LEVELS)
     out = {"supports": len(supports), "supports_without_skt": missing, "objects": len(objects),
            "models": {name: str(d) for name, d in args.model}, "hang_taper": args.hang_taper,
-           "check_families": args.check_families,
+           "check_families": args.check_families, "setup_fallbacks": n_fallbacks,
            "methods": {m: {"success": table[m], "success_ci95": ci[m],
                            "failures_by_reason": {r: int((g["failure_reason"] == r).sum())
                                                   for r in REASONS}}

@@ -66,9 +66,9 @@ def hang(support, obj, method: str, params, model_dir: Path | None, record_every
                              f"clustering.T is {params.clustering.T}")
     m = make_method(method, predictor, support.gt, np.asarray(p.kpam_pre_hang_m, float),
                     p.kpam_lift_m)
-    positions = m.predict(support.cloud).positions
-    task = make_task(method, support, obj, positions, trial_settings(p, params.contact_sim),
-                     record_every)
+    skt = m.predict(support.cloud)
+    task = make_task(method, support, obj, skt.positions, trial_settings(p, params.contact_sim),
+                     record_every, fallbacks=skt.fallbacks[:p.setup_fallbacks])
     return {"task": task, **run_trial(task)}
 
 

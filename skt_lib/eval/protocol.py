@@ -130,12 +130,14 @@ def trial_settings(p: SimEvalParams, cs: ContactSimParams) -> TrialSettings:
         p.grasp_force_n, p.retreat_m, p.retreat_steps, perturbation(cs))
 
 
-def predict_all(methods: dict, supports: list[TestSupport]) -> tuple[dict, dict, dict]:
+def predict_all(methods: dict, supports: list[TestSupport]) -> tuple[dict, dict, dict, dict]:
     """``methods[name](support) -> Method``; returns ({(name, support_id): [positions (T, 3),
-    …]}, {name: [inference seconds per support]}, {(name, support_id): method}), timed one
-    support at a time (batch 1). A proposing method (one with ``propose``) gives all its
-    proposals, timed together; any other method one SKT."""
-    out, seconds, made = {}, {name: [] for name in methods}, {}
+    …]}, {name: [inference seconds per support]}, {(name, support_id): method},
+    {(name, support_id): (fallback positions (T, 3), …)}), timed one support at a time
+    (batch 1). A proposing method (one with ``propose``) gives all its proposals, timed
+    together, and no fallbacks; any other method one SKT and its ``fallbacks`` (the cloud
+    check's other candidates, clearest first; empty for most methods)."""
+    out, seconds, made, fallbacks = {}, {name: [] for name in methods}, {}, {}
     for s in supports:
         for name, make in methods.items():
             method = make(s)
@@ -144,22 +146,27 @@ def predict_all(methods: dict, supports: list[TestSupport]) -> tuple[dict, dict,
             seconds[name].append(time.perf_counter() - t0)
             out[name, s.support_id] = [skt.positions for skt in skts]
             made[name, s.support_id] = method
-    return out, seconds, made
+            fallbacks[name, s.support_id] = () if len(skts) > 1 else skts[0].fallbacks
+    return out, seconds, made, fallbacks
 
 
 def make_task(method: str, s: TestSupport, o: TestObject, positions: np.ndarray,
-              settings: TrialSettings, record_every: int = 0, proposal: int = 0) -> TrialTask:
+              settings: TrialSettings, record_every: int = 0, proposal: int = 0,
+              fallbacks=()) -> TrialTask:
     """One trial; ``proposal`` > 0 for a proposing method's later proposals (their ids end in
-    ``/p<proposal>``)."""
+    ``/p<proposal>``). The set-up's alternatives: the support's other stored SKTs, swept
+    through the support first, for :data:`FALLS_BACK_TO_STORED`; else ``fallbacks`` (a
+    checked learned method's other candidates, ``(T, 3)`` each), in their order, unswept."""
     tid = f"{method}/{s.support_id}/{o.object_id}" + (f"/p{proposal}" if proposal else "")
-    others = s.others if method in FALLS_BACK_TO_STORED else ()
+    stored = method in FALLS_BACK_TO_STORED
+    others = s.others if stored else fallbacks
     # plain Python floats, not numpy scalars: the same values, a tenth of the pickle
     return TrialTask(
         tid, method, s.support_id, o.object_id, s.urdf, o.urdf,
         tuple(np.asarray(o.keypoint, float).ravel().tolist()), o.grasps, float(o.radius_m),
         tuple(map(tuple, np.asarray(positions, float).tolist())), settings, record_every,
         {"difficulty": s.difficulty, "category": o.category, "proposal": proposal}, hand_of(method),
-        tuple(tuple(map(tuple, np.asarray(k, float).tolist())) for k in others))
+        tuple(tuple(map(tuple, np.asarray(k, float).tolist())) for k in others), stored)
 
 
 #: Suffix of the single-sample rows :func:`per_pair` adds for proposing methods.

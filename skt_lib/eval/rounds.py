@@ -1,25 +1,29 @@
 """Running the evaluation's trials: the rounds of proposals, and the replay of chosen
 trials with a trace for the recording."""
 
+import dataclasses
 from collections.abc import Callable
 
-import numpy as np
 import pandas as pd
 
-from skt_lib.eval.protocol import TestObject, TestSupport, make_task
+from skt_lib.eval.protocol import make_task
 from skt_lib.sim.execute import TrialSettings, TrialTask, run_trial
 
 
 def run_rounds(methods, supports, objects, positions: dict, settings: TrialSettings,
-               run: Callable[[list[TrialTask], str], list[dict]]
+               run: Callable[[list[TrialTask], str], list[dict]], fallbacks: dict | None = None
                ) -> tuple[list[dict], list[TrialTask]]:
-    """Every (method, support, object) trial with each method's first SKT; then, round by
-    round, a proposing method's next proposal on the pairs none of its earlier proposals hung
-    (stopping at the first success: the best-of-N verdict is the same, the runs fewer).
+    """Every (method, support, object) trial with each method's first SKT (its set-up may
+    fall back on ``fallbacks[method, support_id]``, as
+    :func:`~skt_lib.eval.protocol.predict_all` gives them); then, round by round, a proposing
+    method's next proposal on the pairs none of its earlier proposals hung (stopping at the
+    first success: the best-of-N verdict is the same, the runs fewer).
     ``run(tasks, label)``: :func:`~skt_lib.sim.execute.run_trial` of every task, in order
     (e.g. on a pool). Returns (rows, tasks) in run order."""
     rows, tasks = [], []
-    todo = [make_task(m, s, o, positions[m, s.support_id][0], settings)
+    fallbacks = fallbacks or {}
+    todo = [make_task(m, s, o, positions[m, s.support_id][0], settings,
+                      fallbacks=fallbacks.get((m, s.support_id), ()))
             for m in methods for s in supports for o in objects]
     n_max = max(len(v) for v in positions.values())
     for r in range(n_max):
@@ -56,19 +60,17 @@ def pick_rollouts(trials: pd.DataFrame, n: int, methods) -> list[str]:
     return chosen
 
 
-def replay(chosen: list[str], tasks: list[TrialTask], rows: list[dict], supports: list[TestSupport],
-           objects: list[TestObject], settings: TrialSettings, record_every: int,
-           run: Callable[[list[TrialTask], str], list[dict]] | None = None) -> list[tuple]:
+def replay(chosen: list[str], tasks: list[TrialTask], rows: list[dict], settings: TrialSettings,
+           record_every: int, run: Callable[[list[TrialTask], str], list[dict]] | None = None
+           ) -> list[tuple]:
     """Run the ``chosen`` trials again with a trace every ``record_every`` steps: ``[(task,
     {"row", "trace"})]``; ``run(tasks, label)`` as in :func:`run_rounds` (e.g. on a pool;
     default: here, in order). Raises if a replay's row differs from the evaluated one
     (recording must not change what happened)."""
     by_id = {t.trial_id: t for t in tasks}
     rows_by_id = {r["trial_id"]: r for r in rows}
-    s_by_id, o_by_id = {s.support_id: s for s in supports}, {o.object_id: o for o in objects}
-    traced = [make_task(t.method, s_by_id[t.support_id], o_by_id[t.object_id],
-                        np.asarray(t.positions), settings, record_every, t.extra["proposal"])
-              for t in (by_id[tid] for tid in chosen)]
+    traced = [dataclasses.replace(by_id[tid], settings=settings, record_every=record_every)
+              for tid in chosen]
     results = (run or (lambda ts, _: [run_trial(t) for t in ts]))(traced, "recording")
     out = []
     for tid, result in zip(chosen, results):

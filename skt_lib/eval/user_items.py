@@ -37,14 +37,16 @@ def load_user_items(root: Path, params) -> tuple[list[TestSupport], list[TestObj
 
 
 def run_user_trials(methods, supports, objects, extra_s, extra_o, positions: dict, settings,
-                    run: Callable) -> list[dict]:
+                    run: Callable, fallbacks: dict | None = None) -> list[dict]:
     """Trial rows of every pair with an imported item, the proposals' rounds included
-    (:func:`~skt_lib.eval.rounds.run_rounds`); ``positions`` must hold every support's."""
+    (:func:`~skt_lib.eval.rounds.run_rounds`); ``positions`` (and ``fallbacks``) must hold
+    every support's."""
     rows = []
     if extra_s:
-        rows += run_rounds(methods, extra_s, [*objects, *extra_o], positions, settings, run)[0]
+        rows += run_rounds(methods, extra_s, [*objects, *extra_o], positions, settings, run,
+                           fallbacks)[0]
     if extra_o and supports:
-        rows += run_rounds(methods, supports, extra_o, positions, settings, run)[0]
+        rows += run_rounds(methods, supports, extra_o, positions, settings, run, fallbacks)[0]
     return rows
 
 

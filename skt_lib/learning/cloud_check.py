@@ -27,19 +27,21 @@ from skt_lib.geometry.skt import skt_frames
 
 #: The ring centre's depth below the keypoint (m): the ring's inner radius.
 RING_CENTRE_BELOW_M = REFERENCE_RING_RADIUS_M - REFERENCE_SECTION_M
-#: Ring placements per SKT segment (waypoints ~6 mm apart at T = 40); on the validation
-#: supports 2 and 3 chose the same candidates, 1 others (docs/pipeline.md).
+#: Ring placements per SKT segment (waypoints ~6 mm apart at T = 40, the ring's section 4 mm).
 SAMPLES_PER_SEGMENT = 2
 
 
-def ring_placements(positions: np.ndarray, samples_per_segment: int = SAMPLES_PER_SEGMENT
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def ring_placements(positions: np.ndarray, samples_per_segment: int = SAMPLES_PER_SEGMENT,
+                    rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Ring centres ``(M, 3)`` and axes ``(M, 3)`` along ``positions (T, 3)`` (ξ_0 first),
-    ``M = (T − 1) · samples_per_segment + 1``."""
+    ``M = (T − 1) · samples_per_segment + 1``; ``rotations (T, 3, 3)``: the SKT frames'
+    rotations where the caller has them (default: :func:`skt_frames` of ``positions``)."""
     if samples_per_segment < 1:
         raise ValueError(f"samples_per_segment: need ≥ 1, got {samples_per_segment}")
     positions = np.asarray(positions, dtype=np.float64)
-    rot = skt_frames(positions)[:, :3, :3]
+    rot = skt_frames(positions)[:, :3, :3] if rotations is None else np.asarray(rotations, float)
+    if rot.shape != (len(positions), 3, 3):
+        raise ValueError(f"rotations: expected {(len(positions), 3, 3)}, got {rot.shape}")
     s = np.arange(samples_per_segment) / samples_per_segment
     seg = positions[:-1, None] + s[None, :, None] * (positions[1:] - positions[:-1])[:, None]
     at = np.concatenate([seg.reshape(-1, 3), positions[-1:]])
@@ -48,13 +50,19 @@ def ring_placements(positions: np.ndarray, samples_per_segment: int = SAMPLES_PE
 
 
 def ring_penetrations(candidates: list[np.ndarray], cloud: np.ndarray,
-                      samples_per_segment: int = SAMPLES_PER_SEGMENT) -> np.ndarray:
+                      samples_per_segment: int = SAMPLES_PER_SEGMENT,
+                      rotations: list[np.ndarray] | None = None) -> np.ndarray:
     """Per candidate SKT ``(T, 3)``: the sum over ring placements and points of ``cloud (N,
     3)`` of the squared penetration (m²) of the reference ring carried along it; 0 where no
-    point is inside the ring's material. All candidates in one neighbour query."""
+    point is inside the ring's material. All candidates in one neighbour query.
+    ``rotations``: each candidate's SKT-frame rotations, as in :func:`ring_placements`."""
     if not len(candidates):
         raise ValueError("candidates: need at least one SKT")
-    placed = [ring_placements(c, samples_per_segment) for c in candidates]
+    if rotations is not None and len(rotations) != len(candidates):
+        raise ValueError(f"rotations: one per candidate, got {len(rotations)} for "
+                         f"{len(candidates)}")
+    placed = [ring_placements(c, samples_per_segment, r)
+              for c, r in zip(candidates, rotations or [None] * len(candidates))]
     centres = np.concatenate([c for c, _ in placed])
     axes = np.concatenate([a for _, a in placed])
     owner = np.repeat(np.arange(len(placed)), [len(c) for c, _ in placed])
@@ -72,9 +80,10 @@ def ring_penetrations(candidates: list[np.ndarray], cloud: np.ndarray,
 
 
 def clearest(candidates: list[np.ndarray], cloud: np.ndarray,
-             samples_per_segment: int = SAMPLES_PER_SEGMENT) -> tuple[int, np.ndarray]:
+             samples_per_segment: int = SAMPLES_PER_SEGMENT,
+             rotations: list[np.ndarray] | None = None) -> tuple[int, np.ndarray]:
     """Index of the candidate SKT ``(T, 3)`` with the least :func:`ring_penetrations` into
     ``cloud`` (the first of equals: pass candidates in order of preference), and every
     candidate's score."""
-    scores = ring_penetrations(candidates, cloud, samples_per_segment)
+    scores = ring_penetrations(candidates, cloud, samples_per_segment, rotations)
     return int(np.argmin(scores)), scores

@@ -33,12 +33,20 @@ class Skt:
     affordance: np.ndarray  # (N,) per input point (after resampling to n_points)
     #: the classifier's softmax probability of ``family`` (NaN where no classifier chose it)
     family_probability: float = float("nan")
+    #: the cloud check's other candidates (positions ``(T, 3)``), clearest first: what a
+    #: robot's set-up may run instead when it finds no grasp that follows ``positions``
+    #: (``sim_eval.setup_fallbacks``); empty where no check ran
+    fallbacks: tuple[np.ndarray, ...] = ()
 
 
 class SktPredictor:
     def __init__(self, model: Sctdn):
         self.model = model.eval()
         self.cfg = model.cfg
+        # an aligned template is its family's stored template moved to the contact, so it has
+        # that template's SKT-frame rotations: computed once here, not per cloud
+        self._template_rotations = np.stack(
+            [skt_frames(t)[:, :3, :3] for t in model.templates.double().numpy()])
 
     @classmethod
     def load(cls, directory: str | Path) -> "SktPredictor":
@@ -73,7 +81,7 @@ class SktPredictor:
         template of each of the ``n`` most probable families are candidates, in that order,
         and the one whose reference ring cuts least into ``points`` is returned
         (:func:`skt_lib.learning.cloud_check.clearest`); its ``family`` and
-        ``family_probability`` are that candidate's."""
+        ``family_probability`` are that candidate's, and the others are its ``fallbacks``."""
         pts = check_cloud(points, "points")
         if len(pts) != self.cfg.n_points:
             if len(pts) < self.cfg.n_points:
@@ -82,18 +90,32 @@ class SktPredictor:
         xyz_n, c, s = normalise(pts)
         x = torch.as_tensor(xyz_n[None], dtype=torch.float32)
         scale = torch.as_tensor([s], dtype=torch.float32)
+        fallbacks = ()
         if deform and self.cfg.check_families:
             out = self.model.family_candidates(x, scale, self.cfg.check_families)
+            families = out["families"].tolist()
             kinds = np.stack([out["trajectory"].double().numpy(), out["aligned"].double().numpy()],
                              1) * s + c  # (n, 2, T, 3): deformed, then template, per family
-            pick, _ = clearest(list(kinds.reshape(-1, *kinds.shape[2:])), pts)
-            family = int(out["families"][pick // 2])
-            positions = kinds[pick // 2, pick % 2]
+            candidates = list(kinds.reshape(-1, *kinds.shape[2:]))
+            frames = [f for k, fam in enumerate(families)
+                      for f in (skt_frames(kinds[k, 0]), _posed(self._template_rotations[fam],
+                                                                kinds[k, 1]))]
+            pick, scores = clearest(candidates, pts, rotations=[f[:, :3, :3] for f in frames])
+            family, positions, skt_pose = families[pick // 2], candidates[pick], frames[pick]
+            fallbacks = tuple(candidates[j] for j in np.argsort(scores, kind="stable") if j != pick)
         else:
             out = self.model(x, scale)
             family = int(out["logits"][0].argmax())
             positions = out["trajectory" if deform else "aligned"][0].double().numpy() * s + c
+            skt_pose = skt_frames(positions)
         aff = out["affordance"][0].numpy()
         probs = torch.softmax(out["logits"][0].double(), -1)
-        return Skt(positions, skt_frames(positions), family, pts[int(aff.argmax())], aff,
-                   float(probs[family]))
+        return Skt(positions, skt_pose, family, pts[int(aff.argmax())], aff,
+                   float(probs[family]), fallbacks)
+
+
+def _posed(rotations: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """SE(3) waypoints ``(T, 4, 4)`` from ``rotations (T, 3, 3)`` and ``positions (T, 3)``."""
+    out = np.tile(np.eye(4), (len(positions), 1, 1))
+    out[:, :3, :3], out[:, :3, 3] = rotations, positions
+    return out

@@ -14,7 +14,8 @@ Two hands (``TrialTask.hand``):
   object at the start); robot–object
   collisions are off while the object is held and on from the release. Where no candidate
   follows the SKT, set-up tries the task's ``alternatives`` (further SKTs of the same
-  support; the oracle's other stored SKTs) in order, skipping one whose start pose the
+  support: the oracle's other stored SKTs, or a checked learned method's other candidates)
+  in order — the oracle's swept-clear ones first — skipping one whose start pose the
   object penetrates, and runs the first that has a grasp (``grasp`` is then prefixed
   ``skt<k>/``).
 - ``floating``: no arm; a massless, collision-free kinematic anchor at the grasp target
@@ -117,8 +118,12 @@ class TrialTask:
     extra: dict = field(default_factory=dict)  # copied into the row (difficulty, category…)
     hand: str = "panda"  # "panda" | "floating"
     #: further SKTs (same layout as ``positions``) the Panda's set-up may fall back to, in
-    #: order, when no grasp follows ``positions`` (the oracle: the support's other stored SKTs)
+    #: order, when no grasp follows ``positions`` (the oracle: the support's other stored SKTs;
+    #: a checked learned method: the cloud check's other candidates)
     alternatives: tuple[tuple[tuple[float, float, float], ...], ...] = ()
+    #: set-up tries first the SKTs along which the object, swept kinematically through the
+    #: simulated support, stays clear (the oracle's, privileged); ``False``: in the given order
+    sweep_alternatives: bool = True
 
 
 class _Trace:
@@ -295,8 +300,9 @@ def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, f
 
     Without alternatives: the task's SKT. With them: the SKTs whose sweep of the object is
     clear (:data:`SWEEP_TOL_M`) first, in order, then the others from the shallowest deepest
-    penetration on (ties in order); the first whose start pose the object does not penetrate
-    and (Panda) that a grasp candidate follows."""
+    penetration on (ties in order) — or, without ``task.sweep_alternatives``, every SKT in
+    order, unswept; the first whose start pose the object does not penetrate and (Panda)
+    that a grasp candidate follows."""
     s = task.settings
     inv = invert(keypoint)
     paths = [path, *(executed_path(p, s.step_m, task.object_radius_m) for p in task.alternatives)]
@@ -319,9 +325,10 @@ def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, f
     # swept lazily, in the order the docstring gives: a clear SKT is tried as soon as its
     # sweep is known clear; the others are swept to their deepest only when none was taken
     penetrating = []
+    sweep = task.alternatives and task.sweep_alternatives
     for k in range(len(paths)):
-        if task.alternatives and _sweep_depth(world, obj, inv, paths[k], bodies,
-                                              stop_above=SWEEP_TOL_M) > SWEEP_TOL_M:
+        if sweep and _sweep_depth(world, obj, inv, paths[k], bodies,
+                                  stop_above=SWEEP_TOL_M) > SWEEP_TOL_M:
             penetrating.append(k)
             continue
         if (out := attempt(k)) is not None:

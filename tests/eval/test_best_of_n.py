@@ -48,7 +48,7 @@ def _fake_trial(task):
                     "success": bool(ok), "failure_reason": "" if ok else "dropped"}, "trace": []}
 
 
-def test_rounds_stop_at_the_first_hung_proposal(monkeypatch):
+def test_rounds_stop_at_the_first_hung_proposal_and_pass_on_fallbacks():
     grasp = (Grasp("g", tuple(np.eye(4).ravel())),)
     sup = [protocol.TestSupport(f"s{i}", "easy", "hook", "u", "m", np.zeros((4, 3)),
                                 np.zeros((10, 3)), 0) for i in range(2)]
@@ -57,8 +57,9 @@ def test_rounds_stop_at_the_first_hung_proposal(monkeypatch):
     positions = {("sctdn", "s0"): [skt(-1)], ("sctdn", "s1"): [skt(1)],
                  ("vatmart", "s0"): [skt(-1), skt(-1), skt(1), skt(1)],
                  ("vatmart", "s1"): [skt(-1), skt(-1), skt(-1), skt(-1)]}
+    fallbacks = {("sctdn", "s0"): (skt(2), skt(3)), ("sctdn", "s1"): ()}
     rows, tasks = run_rounds(["sctdn", "vatmart"], sup, objs, positions, None,
-                             lambda tasks, label: [_fake_trial(t) for t in tasks])
+                             lambda tasks, label: [_fake_trial(t) for t in tasks], fallbacks)
     runs = {}
     for r in rows:
         runs.setdefault((r["method"], r["support_id"], r["object_id"]), []).append(
@@ -69,3 +70,9 @@ def test_rounds_stop_at_the_first_hung_proposal(monkeypatch):
         assert runs["vatmart", "s1", o] == [(k, False) for k in range(4)]
     assert [t.trial_id for t in tasks] == [r["trial_id"] for r in rows]
     assert tasks[-1].trial_id.endswith("/p3")
+    # a method's fallbacks reach its set-up, for that support only, unswept; proposals have none
+    for t in tasks:
+        mine = (t.method, t.support_id) == ("sctdn", "s0")
+        want = [skt(2), skt(3)] if mine else np.zeros((0, 4, 3))
+        assert np.array_equal(np.asarray(t.alternatives).reshape(-1, 4, 3), want), t.trial_id
+        assert not t.sweep_alternatives

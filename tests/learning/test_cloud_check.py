@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from skt_lib.geometry.objects import REFERENCE_RING_RADIUS_M as R, REFERENCE_SECTION_M as W
+from skt_lib.geometry.skt import skt_frames
 from skt_lib.learning.cloud_check import (RING_CENTRE_BELOW_M, clearest, ring_penetrations,
                                           ring_placements)
 from skt_lib.learning.data import normalise
@@ -109,11 +110,38 @@ def test_the_checked_read_out_returns_the_candidate_clearest_of_the_cloud():
     assert checked.family == int(cand["families"][best // 2])
     probs = torch.softmax(cand["logits"][0].double(), -1)
     assert checked.family_probability == pytest.approx(float(probs[checked.family]))
-    # off: the paper's read-out, the classifier's family deformed
+    # the returned SKT carries its own frames; the other candidates are its set-up
+    # fallbacks, clearest first
+    assert np.allclose(checked.frames, skt_frames(checked.positions), atol=1e-6)
+    order = [j for j in np.argsort(scores, kind="stable") if j != best]
+    assert len(checked.fallbacks) == 3
+    for got, j in zip(checked.fallbacks, order):
+        assert np.allclose(got, options[j])
+    # off: the paper's read-out, the classifier's family deformed, with no fallbacks
     plain = SktPredictor(model).predict(pts)
-    assert np.allclose(plain.positions, options[0])
+    assert np.allclose(plain.positions, options[0]) and plain.fallbacks == ()
     # the template-only row never runs the check
-    assert np.allclose(SktPredictor(_small_model(2)).predict(pts, deform=False).positions, options[1])
+    templ = SktPredictor(_small_model(2)).predict(pts, deform=False)
+    assert np.allclose(templ.positions, options[1]) and templ.fallbacks == ()
+
+
+def test_given_rotations_score_as_computed_ones():
+    """The read-out passes frames it already has (a template's are its stored template's);
+    the scores are those of frames computed from the positions, and a wrong shape is refused."""
+    cloud = _rod(z=-0.005)
+    lowered = STRAIGHT - [0.0, 0.0, 0.009]
+    rot = [skt_frames(c)[:, :3, :3] for c in (lowered, STRAIGHT)]
+    assert np.array_equal(ring_penetrations([lowered, STRAIGHT], cloud, rotations=rot),
+                          ring_penetrations([lowered, STRAIGHT], cloud))
+    # the frames, not the positions, set the ring's axes: turned frames move the score
+    quarter = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]])
+    turned = [np.einsum("ij,tjk->tik", quarter, r) for r in rot]
+    assert not np.array_equal(ring_penetrations([lowered], cloud, rotations=turned[:1]),
+                              ring_penetrations([lowered], cloud))
+    with pytest.raises(ValueError, match="rotations"):
+        ring_placements(STRAIGHT, rotations=rot[0][:-1])
+    with pytest.raises(ValueError, match="one per candidate"):
+        ring_penetrations([lowered, STRAIGHT], cloud, rotations=rot[:1])
 
 
 def test_check_families_is_bounded_by_the_number_of_families():

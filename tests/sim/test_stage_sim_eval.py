@@ -144,7 +144,8 @@ def test_template_only_is_the_undeformed_sctdn_output(evaluated):
     assert full.family == templ.family and np.allclose(full.contact, templ.contact)
 
 
-def test_only_the_oracles_fall_back_to_the_supports_other_stored_skts(evaluated, tmp_path):
+def test_set_up_alternatives_stored_skts_for_the_oracles_candidates_for_a_checked_method(
+        evaluated, tmp_path):
     params_path, data, _, _ = evaluated
     p = load_params(params_path)
     # the tiny run stores one SKT per support: add a second, shifted, under a copy of the data
@@ -163,11 +164,17 @@ def test_only_the_oracles_fall_back_to_the_supports_other_stored_skts(evaluated,
         first = skts[skts["support_id"] == s.support_id]["keypoints"].iloc[0]
         assert np.allclose(s.gt, resample(np.stack(first), p.clustering.T))  # lowest index first
         assert len(s.others) == 1 and np.allclose(s.others[0], s.gt + [0.0, 0.0, 0.01])
-        for m in ("oracle", "oracle_floating"):
-            task = make_task(m, s, objects[0], s.gt, settings)
+        fallback = s.gt + [0.0, 0.02, 0.0]
+        for m in ("oracle", "oracle_floating"):  # their stored SKTs, swept; never fallbacks
+            task = make_task(m, s, objects[0], s.gt, settings, fallbacks=(fallback,))
             assert len(task.alternatives) == 1 and np.allclose(task.alternatives[0], s.others[0])
+            assert task.sweep_alternatives
         for m in ("kpam", "sctdn", "template_only", "vatmart", "omnihang"):
             assert make_task(m, s, objects[0], s.gt, settings).alternatives == ()
+        # a checked learned method's fallbacks: its set-up's alternatives, in order, unswept
+        task = make_task("sctdn", s, objects[0], s.gt, settings, fallbacks=(fallback, s.gt))
+        assert np.array_equal(np.asarray(task.alternatives), [fallback, s.gt])
+        assert not task.sweep_alternatives
 
 
 def test_trial_tasks_carry_plain_floats_and_pickle_small(evaluated):

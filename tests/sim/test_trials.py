@@ -194,3 +194,17 @@ def test_with_no_clear_alternative_set_up_runs_the_shallowest(scene, hand):
     task = dataclasses.replace(scenes.ring_task(*scene, deep, hand),
                                alternatives=(as_tuple(deep), as_tuple(shallow)))
     assert run_trial(task)["skt"] == 2
+
+
+def test_unswept_alternatives_run_in_their_order(scene):
+    """A learned method's fallbacks (``sweep_alternatives=False``) are tried in the order
+    given, with no look at the simulated support: out of reach on its own SKT, the Panda runs
+    the first fallback with a grasp even where a later one sweeps shallower — which the
+    oracle's swept set-up would run."""
+    far, deep, shallow = (tuple(map(tuple, scenes.straight_skt(offset=o)))
+                          for o in ((0.0, 1.5, 0.0), (0.0, 0.0, -0.012), (0.0, 0.0, -0.006)))
+    task = dataclasses.replace(scenes.ring_task(*scene, np.asarray(far)),
+                               alternatives=(deep, shallow))
+    assert run_trial(task)["skt"] == 2
+    unswept = run_trial(dataclasses.replace(task, sweep_alternatives=False))
+    assert unswept["skt"] == 1 and unswept["row"]["grasp"].startswith("skt1/"), unswept["row"]
