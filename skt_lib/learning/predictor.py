@@ -43,8 +43,8 @@ class SktPredictor:
     def __init__(self, model: Sctdn):
         self.model = model.eval()
         self.cfg = model.cfg
-        # an aligned template is its family's stored template moved to the contact, so it has
-        # that template's SKT-frame rotations: computed once here, not per cloud
+        # an aligned template is its family's stored template moved to the contact, so the
+        # check scores it with that template's SKT-frame rotations, computed once here
         self._template_rotations = np.stack(
             [skt_frames(t)[:, :3, :3] for t in model.templates.double().numpy()])
 
@@ -101,7 +101,10 @@ class SktPredictor:
                       for f in (skt_frames(kinds[k, 0]), _posed(self._template_rotations[fam],
                                                                 kinds[k, 1]))]
             pick, scores = clearest(candidates, pts, rotations=[f[:, :3, :3] for f in frames])
-            family, positions, skt_pose = families[pick // 2], candidates[pick], frames[pick]
+            family, positions = families[pick // 2], candidates[pick]
+            # a deformed candidate's frames are its own; a template's equal its stored
+            # template's only to rounding (~1e-5 rad), so they are computed for the one returned
+            skt_pose = frames[pick] if pick % 2 == 0 else skt_frames(positions)
             fallbacks = tuple(candidates[j] for j in np.argsort(scores, kind="stable") if j != pick)
         else:
             out = self.model(x, scale)

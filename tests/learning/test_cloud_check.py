@@ -112,7 +112,7 @@ def test_the_checked_read_out_returns_the_candidate_clearest_of_the_cloud():
     assert checked.family_probability == pytest.approx(float(probs[checked.family]))
     # the returned SKT carries its own frames; the other candidates are its set-up
     # fallbacks, clearest first
-    assert np.allclose(checked.frames, skt_frames(checked.positions), atol=1e-6)
+    assert np.array_equal(checked.frames, skt_frames(checked.positions))
     order = [j for j in np.argsort(scores, kind="stable") if j != best]
     assert len(checked.fallbacks) == 3
     for got, j in zip(checked.fallbacks, order):
