@@ -101,6 +101,9 @@ class _FixedNet(torch.nn.Module):
     def __init__(self, cfg, target):
         super().__init__()
         self.cfg, self.target = cfg, torch.as_tensor(target, dtype=torch.float32)
+        # Sctdn's stored templates (metres from ξ_0), which the predictor reads when it loads
+        line = torch.linspace(0, 1, cfg.T)[:, None] * torch.tensor([0.03, 0.0, 0.05])
+        self.register_buffer("templates", line.expand(cfg.k, -1, -1).clone())
 
     def forward(self, xyz_n, scale):
         b = xyz_n.shape[0]
