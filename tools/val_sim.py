@@ -12,6 +12,11 @@ interval and failure reasons, exact McNemar tests of the first method against ev
 other on the same (support, object) pairs, and every pair's outcome (``outcomes``:
 ``{method: {"<support_id>/<object_id>": bool}}``, to pair two runs). Nothing under the data
 root or ``reports/`` changes.
+
+The oracles (``--methods oracle oracle_floating``: each validation support's stored SKTs,
+as in Table I) take part too, so that a choice about the executor itself (e.g.
+``--robot-base``, where the Panda stands) is taken on the ground truth's validation hang
+rate, not on the test set's.
 """
 
 import argparse
@@ -23,7 +28,8 @@ import numpy as np
 import pandas as pd
 
 from skt_lib.config import LEVELS, load_params
-from skt_lib.eval.methods import MODEL_OF, PROPOSING, load_models, make_method
+from skt_lib.eval.methods import FALLS_BACK_TO_STORED, MODEL_OF, PROPOSING, load_models, \
+    make_method
 from skt_lib.eval.protocol import load_test_set, per_pair, predict_all, success_table, \
     trial_settings
 from skt_lib.eval.rounds import run_rounds
@@ -60,7 +66,8 @@ def main(argv=None) -> int:
     ap.add_argument("--params", default="params.yaml", type=Path)
     ap.add_argument("--data-root", default="data", type=Path)
     ap.add_argument("--methods", nargs="+", default=["sctdn", "template_only"],
-                    choices=sorted(MODEL_OF), help="the first is compared with each other")
+                    choices=[*FALLS_BACK_TO_STORED, *sorted(MODEL_OF)],
+                    help="the first is compared with each other")
     ap.add_argument("--model", action="append", default=[], type=_model_override,
                     metavar="NAME=DIR", help="load model NAME (sctdn, vatmart, …) from DIR")
     ap.add_argument("--hang-taper", type=int, default=None, metavar="N",
@@ -72,10 +79,15 @@ def main(argv=None) -> int:
     ap.add_argument("--setup-fallbacks", type=int, default=None, metavar="N",
                     help="let the set-up fall back on this many of the cloud check's other "
                          "candidates instead of sim_eval.setup_fallbacks")
+    ap.add_argument("--robot-base", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                    help="stand the Panda's base here (world, m) instead of at "
+                         "sim_eval.robot_base_m")
     ap.add_argument("--out", default=Path("data/val_sim/val_sim.json"), type=Path)
     args = ap.parse_args(argv)
     params = load_params(args.params)
     p, T, seed = params.sim_eval, params.clustering.T, params.common.seed
+    if args.robot_base is not None:
+        p = p.model_copy(update={"robot_base_m": tuple(args.robot_base)})
     supports, objects, missing = load_test_set(args.data_root, T, seed, p.grasp_pitch_deg,
                                                 p.grasp_rolls_deg, p.grasp_yaws_deg,
                                                 support_split="val", object_split="train")
@@ -94,7 +106,7 @@ def main(argv=None) -> int:
     pre = np.asarray(p.kpam_pre_hang_m, float)
 
     def make(m: str, s):
-        return make_method(m, models.get(MODEL_OF[m]), s.gt, pre, p.kpam_lift_m,
+        return make_method(m, models.get(MODEL_OF.get(m)), s.gt, pre, p.kpam_lift_m,
                            rng=item_rng(seed, f"val_sim/{m}", s.support_id),
                            n_proposals=p.n_proposals)
 
@@ -117,6 +129,7 @@ def main(argv=None) -> int:
     out = {"supports": len(supports), "supports_without_skt": missing, "objects": len(objects),
            "models": {name: str(d) for name, d in args.model}, "hang_taper": args.hang_taper,
            "check_families": args.check_families, "setup_fallbacks": n_fallbacks,
+           "robot_base_m": list(p.robot_base_m),
            "methods": {m: {"success": table[m], "success_ci95": ci[m],
                            "failures_by_reason": {r: int((g["failure_reason"] == r).sum())
                                                   for r in REASONS}}

@@ -60,3 +60,24 @@ def test_a_hang_taper_override_keeps_the_weights_and_moves_only_the_deformation(
                for k, v in checked.model.state_dict().items())
     c = checked.predict(cloud).positions
     assert np.allclose(c, a.positions) or np.allclose(c, template)
+
+
+def test_the_oracles_run_on_validation_and_the_robot_base_moves_the_panda(tiny_evaluated, tmp_path):
+    params, data, _, _ = tiny_evaluated
+    runs = {}
+    for name, base in (("here", []), ("far", ["--robot-base", "5", "0", "0.3"])):
+        out = tmp_path / f"{name}.json"
+        assert main(["--params", str(params), "--data-root", str(data), "--methods", "oracle",
+                     "oracle_floating", *base, "--out", str(out)]) == 0
+        runs[name] = json.loads(out.read_text())
+    here, far = runs["here"], runs["far"]
+    assert far["robot_base_m"] == [5.0, 0.0, 0.3] and here["robot_base_m"] != far["robot_base_m"]
+    n = here["supports"] * here["objects"]
+    assert n > 0 and len(far["outcomes"]["oracle"]) == n
+    # 5 m away the Panda reaches no hang: nothing hangs, and the set-up finds no grasp ...
+    assert here["methods"]["oracle"]["success"]["all"] > 0
+    assert far["methods"]["oracle"]["success"]["all"] == 0
+    ik = {k: r["methods"]["oracle"]["failures_by_reason"]["ik_failed"] for k, r in runs.items()}
+    assert ik["far"] > ik["here"]
+    # ... and the floating hand, which has no base, is not moved
+    assert far["outcomes"]["oracle_floating"] == here["outcomes"]["oracle_floating"]
