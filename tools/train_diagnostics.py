@@ -17,7 +17,11 @@ except where a run says otherwise; results in ``reports/train/diagnostics.{json,
   with both given — how much of the error each prediction adds;
 - **where the contact misses** (committed model, validation views that show the contact):
   each miss (> 1 cm) split into its component along the hanging arm at the hang (the
-  generator's ``hang_tangent``, ``supports.parquet``) and across it, per level.
+  generator's ``hang_tangent``, ``supports.parquet``) and across it, per level;
+- **per level** (committed model, validation views): the trajectory error over the whole SKT
+  and over its ``HANG_END`` waypoints nearest the hang (where millimetres decide a threading),
+  the ξ_0 error, the classifier's accuracy and confusion, the contact, and the same
+  trajectory errors with the true family and contact given.
 
 Not part of ``dvc repro`` (minutes on 2 cores) and not a DVC output: a documented run whose
 numbers the train report quotes.
@@ -118,6 +122,65 @@ def contact_misses(model: Sctdn, val, views, tangents: dict) -> dict:
                          map(int, r))) for lv, r in rows.items() if r[0]}
 
 
+#: Waypoints from ξ_0 that make the "hanging end" of an SKT in :func:`per_level`.
+HANG_END = 10
+
+
+def _nearest_gt_errors(traj: torch.Tensor, gt: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """``(B, T)`` waypoint distances of ``traj (B, T, 3)`` to its nearest (mean waypoint
+    distance) ground-truth SKT of ``gt (B, G, T, 3)``."""
+    d = torch.linalg.norm(traj[:, None] - gt, dim=-1)  # (B, G, T)
+    nearest = d.mean(-1).masked_fill(~valid, float("inf")).argmin(-1)
+    return d[torch.arange(len(d)), nearest]
+
+
+@torch.no_grad()
+def per_level(model: Sctdn, val, views, k: int) -> dict:
+    """Per level (and ``all``) of the validation supports, every view in ``views``: mean
+    trajectory error (mm) over the SKT and over its :data:`HANG_END` waypoints from ξ_0, the
+    ξ_0 error, the same two trajectory errors with the true family and contact given,
+    classifier accuracy and confusion (``confusion[true][predicted]``, ``k`` families), and
+    the contact within :data:`CONTACT_OK_M` over the views that show it."""
+    model.eval()
+    rows: dict = {}
+    for s in val:
+        b = make_batch([(s, int(v)) for v in views])
+        mm = (b["scale"] * 1000)[:, None]
+        out = model(b["xyz"], b["scale"])
+        forced = model(b["xyz"], b["scale"], b["family"], b["contact"])["trajectory"]
+        err = _nearest_gt_errors(out["trajectory"], b["gt"], b["valid"]) * mm
+        err_forced = _nearest_gt_errors(forced, b["gt"], b["valid"]) * mm
+        picked = out["affordance"].argmax(-1).tolist()
+        pred = out["logits"].argmax(-1).tolist()
+        for i, v in enumerate(views):
+            for lv in (s.level, "all"):
+                r = rows.setdefault(lv, {"traj_mm": [], "hang_end_mm": [], "xi0_mm": [],
+                                         "forced_traj_mm": [], "forced_hang_end_mm": [],
+                                         "contact_ok": [], "confusion": np.zeros((k, k), int)})
+                r["traj_mm"].append(float(err[i].mean()))
+                r["hang_end_mm"].append(float(err[i, :HANG_END].mean()))
+                r["xi0_mm"].append(float(err[i, 0]))
+                r["forced_traj_mm"].append(float(err_forced[i].mean()))
+                r["forced_hang_end_mm"].append(float(err_forced[i, :HANG_END].mean()))
+                r["confusion"][s.family, pred[i]] += 1
+                if s.contact_visible[int(v)]:
+                    e = np.linalg.norm(s.points[int(v)][picked[i]].astype(np.float64) - s.contact)
+                    r["contact_ok"].append(bool(e <= CONTACT_OK_M))
+    out = {}
+    for lv in (*LEVELS, "all"):
+        if lv not in rows:
+            continue
+        r = rows[lv]
+        c = r["confusion"]
+        out[lv] = {m: float(np.mean(r[m])) for m in ("traj_mm", "hang_end_mm", "xi0_mm",
+                                                      "forced_traj_mm", "forced_hang_end_mm")} | {
+            "n_views": int(c.sum()), "cls_acc": float(np.trace(c) / c.sum()),
+            "confusion": c.tolist(),
+            "contact_within_1cm": float(np.mean(r["contact_ok"])) if r["contact_ok"] else None,
+            "n_contact_visible": len(r["contact_ok"])}
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--params", default="params.yaml")
@@ -154,6 +217,7 @@ def main(argv=None) -> int:
     sup = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")
     tangents = {sid: np.asarray(t, float) / np.linalg.norm(t) for sid, t in sup["hang_tangent"].items()}
     out["contact_misses"] = contact_misses(model, val, p.val_views, tangents)
+    out["per_level"] = per_level(model, val, p.val_views, k)
     dest = Path(args.out)
     dest.mkdir(parents=True, exist_ok=True)
     (dest / "diagnostics.json").write_text(json.dumps(out, indent=2, sort_keys=True) + "\n")
@@ -207,7 +271,30 @@ def _markdown(d: dict) -> str:
         n = r["visible"]
         lines.append(f"| {lv} | {n} | {r['within_1cm'] / n:.3f} | {n - r['within_1cm']} "
                      f"| {r['misses_along_arm']} | {r['within_1cm_across_arm'] / n:.3f} |")
-    return "\n".join(lines) + "\n"
+    pl = d["per_level"]
+    lines += ["", f"**Per level**, committed model, validation views, no teacher forcing unless said: "
+              f"trajectory error over the SKT and over its {HANG_END} waypoints from ξ_0 (the hanging "
+              "end, where a threading is decided), ξ_0 error, the classifier, the contact; the last two "
+              "columns with the true family and contact given:", "",
+              "| level | views | SKT mm | hanging end mm | ξ_0 mm | cls acc | contact ≤ 1 cm "
+              "| SKT mm, true family + contact | hanging end mm, true family + contact |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for lv, r in pl.items():
+        lines.append(f"| {lv} | {r['n_views']} | {r['traj_mm']:.1f} | {r['hang_end_mm']:.1f} "
+                     f"| {r['xi0_mm']:.1f} | {r['cls_acc']:.3f} | {_f(r['contact_within_1cm'])} "
+                     f"({r['n_contact_visible']} views) | {r['forced_traj_mm']:.1f} "
+                     f"| {r['forced_hang_end_mm']:.1f} |")
+    k = len(pl["all"]["confusion"])
+    lines += ["", "**Classifier confusion per level** (validation views; row: true family, "
+              "column: predicted):", ""]
+    for lv, r in pl.items():
+        if lv == "all":
+            continue
+        lines += [f"*{lv}*", "", "| true \\ predicted | " + " | ".join(map(str, range(k))) + " |",
+                  "|---|" + "---|" * k]
+        lines += [f"| {j} | " + " | ".join(map(str, row)) + " |" for j, row in enumerate(r["confusion"])]
+        lines.append("")
+    return "\n".join(lines).rstrip("\n") + "\n"
 
 
 if __name__ == "__main__":
