@@ -109,6 +109,76 @@ def test_contact_misses_splits_along_and_across_the_arm():
     assert set(r) == {"hard", "all"}
 
 
+def test_per_level_measures_each_level_against_known_predictions():
+    """A stand-in model whose predictions are the ground truth moved by known amounts: the
+    SKT, hanging-end and ξ_0 errors, the confusion and the contact come out exactly, per
+    level and over all; with the true family and contact given (teacher forcing) it returns
+    the ground truth itself."""
+    import torch
+
+    from skt_lib.learning.data import SupportData
+
+    tool = _diagnostics_tool()
+    T, k = 12, 3
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-0.1, 0.1, (2, 32, 3)).astype(np.float32)
+    gt = np.cumsum(rng.normal(0.0, 0.01, (1, T, 3)), axis=1)
+    aff = np.zeros((2, 32), np.float32)
+    easy = SupportData("e", "val", 0, pts, aff, gt, pts[0, 3].astype(np.float64), aff,
+                       np.array([True, False]), "easy")  # the second view hides the contact
+    hard = SupportData("h", "val", 2, pts, aff, gt, pts[0, 3].astype(np.float64) + [0.0, 0.02, 0.0],
+                       aff, np.array([True, True]), "hard")
+    shift = {"e": 0.004, "h": 0.01}  # metres, along x, from waypoint 0 on (hanging end included)
+
+    class Known:
+        def eval(self):
+            return self
+
+        def __call__(self, xyz, scale, family=None, contact=None):
+            n = len(xyz)
+            sid = "e" if self.level == "easy" else "h"
+            c, sc = self.centroid[:, None], self.scale[:, None, None]  # per view
+            truth = torch.as_tensor((gt[0][None] - c) / sc, dtype=torch.float32)
+            move = torch.zeros(n, T, 3)
+            if family is None:
+                step = torch.as_tensor(shift[sid] / sc[..., 0], dtype=torch.float32)
+                move[:, :tool.HANG_END, 0] = step  # the hanging end: the shift …
+                move[:, tool.HANG_END:, 0] = 3 * step  # … the rest of the way: three times it
+            logits = torch.zeros(n, k)
+            logits[:, 1 if sid == "h" else 0] = 1.0  # the hard support taken for family 1
+            a = torch.zeros(n, xyz.shape[1])
+            a[:, 3] = 1.0  # picks point 3: the easy support's contact, 2 cm off the hard one's
+            return {"trajectory": truth + move, "logits": logits, "affordance": a}
+
+    model = Known()
+    real = tool.make_batch
+
+    def batch(items):
+        b = real(items)
+        s = items[0][0]
+        model.level, model.scale, model.centroid = s.level, b["scale"].double().numpy(), b["centroid"].double().numpy()
+        return b
+
+    tool.make_batch = batch
+    try:
+        r = tool.per_level(model, [easy, hard], [0, 1], k)
+    finally:
+        tool.make_batch = real
+    assert set(r) == {"easy", "hard", "all"}
+    whole = (tool.HANG_END + 3 * (T - tool.HANG_END)) / T  # the SKT's mean, in shifts
+    for lv, mm in (("easy", 4.0), ("hard", 10.0)):
+        for key, want in (("traj_mm", mm * whole), ("hang_end_mm", mm), ("xi0_mm", mm)):
+            assert r[lv][key] == pytest.approx(want, abs=1e-3), (lv, key)
+        assert r[lv]["forced_traj_mm"] == pytest.approx(0.0, abs=1e-3)
+        assert r[lv]["n_views"] == 2
+    assert r["all"]["traj_mm"] == pytest.approx(7.0 * whole, abs=1e-3)
+    assert r["easy"]["cls_acc"] == 1.0 and r["hard"]["cls_acc"] == 0.0
+    assert r["hard"]["confusion"] == [[0, 0, 0], [0, 0, 0], [0, 2, 0]]
+    assert r["all"]["confusion"] == [[2, 0, 0], [0, 0, 0], [0, 2, 0]]
+    assert (r["easy"]["contact_within_1cm"], r["easy"]["n_contact_visible"]) == (1.0, 1)
+    assert (r["hard"]["contact_within_1cm"], r["hard"]["n_contact_visible"]) == (0.0, 2)
+
+
 def test_train_diagnostics_tool_writes_its_tables(tiny_dataset, tmp_path):
     """tools/train_diagnostics.py on the tiny dataset: every section present, finite, the
     learning curve on ¼, ½ and all training supports, and the overfit run lowers the error."""
@@ -129,8 +199,11 @@ def test_train_diagnostics_tool_writes_its_tables(tiny_dataset, tmp_path):
     assert all(np.isfinite(v["traj_mm"]) and np.isfinite(v["xi0_mm"]) for v in e.values())
     assert d["contact_misses"]["all"]["visible"] == sum(
         r["visible"] for lv, r in d["contact_misses"].items() if lv != "all")
+    pl = d["per_level"]
+    assert pl["all"]["n_views"] == sum(r["n_views"] for lv, r in pl.items() if lv != "all")
+    assert sum(map(sum, pl["all"]["confusion"])) == pl["all"]["n_views"]
     md = (tmp_path / "diagnostics.md").read_text()
-    assert "Learning curve" in md and "Where the contact misses" in md
+    assert "Learning curve" in md and "Where the contact misses" in md and "**Per level**" in md
 
 
 def test_train_twice_gives_the_same_checkpoint_bytes(tiny_dataset, tmp_path):
