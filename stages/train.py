@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     curve = [h["val_traj_l2_mm"] for h in history]
     last5 = float(np.mean(curve[-5:]))
     metrics = {**best, **ci, "n_train_supports": len(train), "n_val_supports": len(val),
-               "epochs": p.epochs,
+               "epochs": p.epochs, "release_lift_mm": 1000 * model.cfg.release_lift_m,
                "best_epoch": int(np.argmin(curve)), "val_traj_l2_mm_last5_mean": last5,
                # settled: the chosen epoch is not a lucky dip of a still-swinging curve
                "val_curve_settled": bool(best["val_traj_l2_mm"] >= 0.9 * last5)}
@@ -81,7 +81,10 @@ def main(argv=None) -> int:
                 f"training support ({len(train)} supports) on {torch.get_num_threads()} CPU "
                 "threads (wall-clock times, the inference time and its torch.profiler breakdown: "
                 f"the git-ignored run log `logs/train.json`); best epoch chosen on {len(val)} "
-                f"validation supports × views {list(p.val_views)}.")
+                f"validation supports × views {list(p.val_views)}. Each family's template is "
+                f"placed with its ξ_0 {1000 * model.cfg.release_lift_m:.1f} mm above the predicted "
+                "contact: the training SKTs' mean height of ξ_0 over the contact "
+                "(`release_lift_mm`; docs/pipeline.md, \"The release lift\").")
     report.table(["metric (best epoch)", "value", "95 % interval", "unit"],
                  [[k2, v, _interval(ci.get(f"{k2}_ci95")), _unit(k2)] for k2, v in best.items()])
     report.text(f"Intervals: Wilson over the {len(items)} (support, view) pairs for the two rates "

@@ -1,6 +1,7 @@
 """SCTDN (paper §V-B): classify the support's template family, predict its affordance map,
 align the family's template at the predicted contact point and deform it with
-shape-conditioned features.
+shape-conditioned features. Deviation: the template's ξ_0 goes ``release_lift_m`` above the
+contact point, not onto it (the training SKTs' mean; see :class:`SctdnConfig`).
 
 Inputs are normalised clouds: ``xyz_n = (xyz − centroid) / scale`` with ``scale`` the max
 point radius, per cloud. Templates are stored in metres relative to ξ_0 and scaled into
@@ -43,6 +44,12 @@ class SctdnConfig:
     # the deformed SKT and the aligned template of each of the n most probable families and
     # returns the one the input cloud says is clearest (skt_lib.learning.cloud_check)
     check_families: int = 0
+    # how far above the contact point the template's ξ_0 is placed (m, support-frame z): an
+    # SKT's ξ_0 is the object's keypoint at the release, which sits above the support's
+    # contact (the aperture's top clears the arm; the release may be lifted). Set from the
+    # training SKTs by train_sctdn (skt_lib.learning.train.release_lift); 0: at the contact
+    # (the paper's alignment)
+    release_lift_m: float = 0.0
 
     def __post_init__(self):
         if self.condition not in CONDITIONS:
@@ -50,6 +57,8 @@ class SctdnConfig:
         if not 0 <= self.check_families <= self.k:
             raise ValueError(f"check_families: need 0 ≤ check_families ≤ k = {self.k}, "
                              f"got {self.check_families}")
+        if not abs(self.release_lift_m) <= 0.02:  # a keypoint 2 cm off its contact does not rest on it
+            raise ValueError(f"release_lift_m: need |release_lift_m| ≤ 0.02 m, got {self.release_lift_m}")
         if not 0 <= self.hang_taper < self.T:
             raise ValueError(f"hang_taper: need 0 ≤ hang_taper < T = {self.T}, got {self.hang_taper}")
         n = self.n_points
@@ -67,6 +76,7 @@ class SctdnConfig:
         data = json.loads(text)
         data.setdefault("hang_taper", 0)  # models saved before the taper deform every waypoint
         data.setdefault("check_families", 0)  # and before the cloud check read out the argmax
+        data.setdefault("release_lift_m", 0.0)  # and before templates were lifted off the contact
         return cls(**data)
 
 
@@ -125,7 +135,8 @@ class Sctdn(nn.Module):
     def _deform(self, xyz_n, scale, feats, aff, family, contact_n):
         """(aligned template, deformed trajectory) ``(B, T, 3)`` of ``family (B,)`` at
         ``contact_n (B, 3)``."""
-        aligned = contact_n[:, None] + self.templates[family] / scale[:, None, None]
+        lift = contact_n.new_tensor([0.0, 0.0, self.cfg.release_lift_m])
+        aligned = contact_n[:, None] + (self.templates[family] + lift) / scale[:, None, None]
         if self.cfg.condition == "shape":
             shape = masked_max_pool(feats, aff, self.cfg.aff_threshold)
         else:

@@ -3,7 +3,7 @@
 import copy
 from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -194,11 +194,27 @@ def fit(make_model: Callable[[], torch.nn.Module], batch_loss, validate, train: 
     return model, best
 
 
+def release_lift(supports: list[SupportData]) -> float:
+    """How far above the support's contact point an SKT's ξ_0 sits (m): the mean over
+    ``supports`` of each one's mean over its SKTs of (ξ_0 − contact)·z, so every support
+    counts once. ξ_0 is the reference's keypoint at the release — its aperture's top, clear
+    of the arm and lifted where the planner had to (``rrt_skts.max_release_offset_m``) —
+    while the contact is the point of the arm it rests on; the template, stored relative to
+    ξ_0, is placed this far above the predicted contact. Only the vertical part: the
+    horizontal offset is the reference ring's own tilt at the hang (~2.6 mm to one side),
+    which other objects do not share."""
+    if not supports:
+        raise ValueError("supports: need at least one to estimate the release lift")
+    return float(np.mean([np.mean(s.skts[:, 0, 2] - s.contact[2]) for s in supports]))
+
+
 def train_sctdn(cfg: SctdnConfig, templates: np.ndarray, train: list[SupportData],
                 val: list[SupportData], st: TrainSettings, seed: int,
                 on_epoch: Callable[[int, dict], None] | None = None) -> tuple[Sctdn, dict]:
-    """Train SCTDN (or its ablation, ``cfg.condition``); returns (model with the best
+    """Train SCTDN (or its ablation, ``cfg.condition``) with its templates placed
+    :func:`release_lift` (of ``train``) above the contact; returns (model with the best
     validation weights, its validation metrics)."""
+    cfg = replace(cfg, release_lift_m=release_lift(train))
     def batch_loss(model, b):
         out = model(b["xyz"], b["scale"], b["family"], b["contact"])
         return sctdn_loss(out, b["gt"], b["valid"], b["aff"], b["family"], b["contact_target"],

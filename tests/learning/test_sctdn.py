@@ -1,3 +1,5 @@
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -71,6 +73,53 @@ def test_the_hang_taper_keeps_the_hang_at_the_contact_and_deforms_beyond_it():
     assert torch.equal(tapered[:, 3:], free[:, 3:])  # past the taper: the same deformation
     with pytest.raises(ValueError, match="hang_taper"):
         SctdnConfig(k=2, T=8, hang_taper=8)
+
+
+def _lifted(sup: SupportData, offsets_m) -> SupportData:
+    """``sup`` with one SKT per row of ``offsets_m (G, 3)``: its own SKT moved so that ξ_0 is
+    that far from the contact."""
+    skts = np.stack([sup.skts[0] - sup.skts[0, 0] + sup.contact + o for o in np.asarray(offsets_m)])
+    return SupportData(**{**sup.__dict__, "skts": skts})
+
+
+def test_release_lift_is_the_mean_height_of_xi0_over_the_contact_each_support_once():
+    from skt_lib.learning.train import release_lift
+
+    s0, s1 = _supports(2)
+    # s0: ξ_0 1 and 3 mm above its contact (mean 2); s1: 6 mm; sideways offsets do not count
+    sup = [_lifted(s0, [[0.004, -0.003, 0.001], [0.0, 0.002, 0.003]]), _lifted(s1, [[0.0, 0.01, 0.006]])]
+    assert release_lift(sup) == pytest.approx(0.004)  # per support: (2 + 6) / 2, not 10 / 3
+    with pytest.raises(ValueError, match="supports"):
+        release_lift([])
+
+
+def test_the_template_goes_release_lift_above_the_contact_and_training_sets_it():
+    from skt_lib.learning.train import TrainSettings, train_sctdn
+
+    sup = _supports()
+    b = make_batch([(s, 0) for s in sup])
+    templates = torch.randn(2, 8, 3) * 0.01
+    flat, lifted = (Sctdn(SctdnConfig(k=2, T=8, n_points=256, release_lift_m=h), templates).eval()(
+        b["xyz"], b["scale"], b["family"], b["contact"])["aligned"] for h in (0.0, 0.003))
+    moved_m = (lifted - flat) * b["scale"][:, None, None]
+    assert torch.allclose(moved_m, torch.tensor([0.0, 0.0, 0.003]).expand_as(moved_m), atol=1e-7)
+    # ξ_0 of the template lies at the contact plus the lift, in metres
+    xi0 = flat[:, 0] * b["scale"][:, None] + b["centroid"] - torch.as_tensor(
+        np.stack([s.contact for s in sup]), dtype=torch.float32)
+    assert torch.allclose(xi0, templates[b["family"], 0], atol=1e-6)
+    with pytest.raises(ValueError, match="release_lift_m"):
+        SctdnConfig(k=2, T=8, release_lift_m=0.03)
+    saved = json.loads(SctdnConfig(k=2, T=8, release_lift_m=0.003).to_json())
+    assert SctdnConfig.from_json(json.dumps(saved)).release_lift_m == 0.003
+    del saved["release_lift_m"]  # a config saved before the lift: at the contact
+    assert SctdnConfig.from_json(json.dumps(saved)).release_lift_m == 0.0
+
+    train = [_lifted(s, [[0.0, 0.0, 0.002]]) for s in sup[:3]]
+    val = [_lifted(sup[3], [[0.0, 0.0, 0.009]])]
+    st = TrainSettings(epochs=1, views_per_epoch=1, batch_size=3, lr=1e-3, lr_final_ratio=0.1,
+                       weight_decay=0.0, val_views=(0,), contact_weight=0.1, threads=1)
+    model, _ = train_sctdn(SctdnConfig(k=2, T=8, n_points=256), np.zeros((2, 8, 3)), train, val, st, seed=0)
+    assert model.cfg.release_lift_m == pytest.approx(0.002)  # the training supports', not val's
 
 
 def test_predictor_roundtrip_and_input_checks(tmp_path):
