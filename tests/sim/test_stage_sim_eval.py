@@ -138,9 +138,12 @@ def test_template_only_is_the_undeformed_sctdn_output(evaluated):
     pts = read_npz(data / "render_views" / f"{sid}.npz", RENDER_SPEC)["points"][0].astype(np.float64)
     full, templ = predictor.predict(pts), predictor.predict(pts, deform=False)
     t = predictor.model.templates[templ.family].double().numpy()
-    # the template, translated so that ξ_0 sits at the predicted contact point
+    # the template, translated so that ξ_0 sits the training SKTs' release lift above the
+    # predicted contact point
+    lift = predictor.cfg.release_lift_m
+    assert lift > 0.0  # the tiny run's SKTs, too, are released above their contacts
     assert np.allclose(templ.positions - templ.positions[0], t - t[0], atol=1e-5)
-    assert np.allclose(templ.positions[0], templ.contact + t[0], atol=1e-5)
+    assert np.allclose(templ.positions[0], templ.contact + t[0] + [0.0, 0.0, lift], atol=1e-5)
     assert full.family == templ.family and np.allclose(full.contact, templ.contact)
 
 
