@@ -128,7 +128,7 @@ def test_per_level_measures_each_level_against_known_predictions():
                        np.array([True, False]), "easy")  # the second view hides the contact
     hard = SupportData("h", "val", 2, pts, aff, gt, pts[0, 3].astype(np.float64) + [0.0, 0.02, 0.0],
                        aff, np.array([True, True]), "hard")
-    shift = {"e": 0.004, "h": 0.01}  # metres, along x, from waypoint 0 on (hanging end included)
+    shift = {"e": 0.004, "h": 0.01}  # metres along x over the hanging end, three times that beyond
 
     class Known:
         def eval(self):
