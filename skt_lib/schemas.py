@@ -56,7 +56,7 @@ _VEC4 = pa.list_(pa.float64(), 4)
 
 CONTACTS = TableSchema(
     "contacts",
-    1,
+    2,
     {
         "item_id": pa.string(),
         "kind": pa.string(),
@@ -72,6 +72,8 @@ CONTACTS = TableSchema(
         "hang_position": _VEC3,
         "hang_quat": _VEC4,
         "goal_clearance_m": pa.float64(),
+        "goal_rank": pa.int32(),  # the successful hang that became the goal (0: the medoid), -1: none
+        "goal_shift_m": pa.float64(),  # how far back along the arm its drops were made (NaN: none)
     },
 )
 

@@ -1,7 +1,8 @@
 """contact_sim — forward-simulated hangs: object keypoints and support contact points.
 
 Inputs:  data/mesh_gen/{supports,objects}.parquet and their URDFs; params common,
-         compute, contact_sim.
+         compute, contact_sim, and sim_eval's object damping (a support's goal hang is judged
+         by the evaluation's physics).
 Outputs: data/contact_sim/contacts.parquet (one row per object on the rod and per support
          with the reference object), contact_sim.rrd; reports/contact_sim/{metrics.json,
          report.md, PNGs}.
@@ -18,7 +19,8 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
 from skt_lib.io import read_table, write_table
 from skt_lib.schemas import CONTACTS, OBJECTS, SUPPORTS
-from skt_lib.sim.contact_sim import ROD_ARM, ROD_SITE, HangTask, reference_task, simulate_hangs
+from skt_lib.sim.contact_sim import (ROD_ARM, ROD_SITE, HangTask, eval_damping, reference_task,
+                                     simulate_hangs)
 from stages._common import item_store, parse_args, run_items
 from viz.contact_sim_report import log_hangs, write_report
 from viz.report import write_metrics, write_run_log
@@ -38,7 +40,7 @@ def main(argv=None) -> int:
     obj_tasks = [HangTask(o.object_id, "object_on_rod", o.object_id, str(src / o.urdf_path),
                           o.aperture_clearance_m, "", "", ROD_ARM, ROD_SITE, p.rod_radius_m, seed, p)
                  for o in objects.itertuples()]
-    sup_tasks = [reference_task(s, ref, src, seed, p) for s in supports.itertuples()]
+    sup_tasks = [reference_task(s, ref, src, seed, p, eval_damping(params)) for s in supports.itertuples()]
     work = item_store(args)
     t0 = time.perf_counter()
     obj_rows, obj_fail, obj_failed = run_items(simulate_hangs, obj_tasks, params.compute,
@@ -73,6 +75,18 @@ def main(argv=None) -> int:
                               / max(1, sum(r["n_attempts"] for r in rows))),
         "failures_by_reason": dict(sorted((Counter(r["failure_reason"] for r in rows if not r["ok"])
                                            + obj_fail + sup_fail).items())),
+        # every goal passed the evaluation's perturbation (undamped tilts); where the most
+        # consistent hang did not, a later one became the goal
+        "goal_judged_by": "sim_eval perturbation (object damping {} / {}, settle {} / {})".format(
+            *eval_damping(params)),
+        "goal_medoid_passes_eval_rate": (  # of supports with a hang: the medoid passed at once
+            sum(r["goal_rank"] == 0 for r in sup_rows)
+            / max(1, sum(r["n_success"] > 0 for r in sup_rows))),
+        "n_supports_goal_not_medoid": sum(r["ok"] and r["goal_rank"] > 0 for r in sup_rows),
+        "n_supports_goal_moved_along_arm": sum(r["ok"] and r["goal_shift_m"] > 0 for r in sup_rows),
+        "n_supports_no_eval_stable_hang_by_level": {
+            lv: sum(level[r["support_id"]] == lv and r["failure_reason"].startswith("goal_")
+                    for r in sup_rows) for lv in LEVELS},
         "n_items_raised": len(raised),
         "items_raised": {t.item_id: f.reason for t, f in raised},
     }

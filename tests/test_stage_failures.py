@@ -98,10 +98,13 @@ def test_contact_sim_counts_items_that_raise(monkeypatch, tmp_path):
                 "support_id": task.support_id, "ok": ok,
                 "failure_reason": "" if ok else "dropped", "n_success": 2 * ok, "n_attempts": 2,
                 "hang_position": [0.0, 0.0, 0.0], "hang_quat": [0.0, 0.0, 0.0, 1.0],
-                "contact_support": [0.0, 0.0, 0.0]}
+                "contact_support": [0.0, 0.0, 0.0], "goal_rank": 0 if ok else -1,
+                "goal_shift_m": 0.0 if ok else float("nan")}
 
     monkeypatch.setattr(contact_sim, "load_params", lambda _: SimpleNamespace(
-        contact_sim=p, common=SimpleNamespace(seed=1), compute=COMPUTE))
+        contact_sim=p, common=SimpleNamespace(seed=1), compute=COMPUTE,
+        sim_eval=SimpleNamespace(linear_damping=0.04, angular_damping=0.04,
+                                 settle_linear_damping=1.0, settle_angular_damping=5.0)))
     monkeypatch.setattr(contact_sim, "read_table",
                         lambda path, schema: objects if "objects" in str(path) else supports)
     monkeypatch.setattr(contact_sim, "simulate_hangs", fake_sim)

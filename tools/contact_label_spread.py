@@ -20,7 +20,7 @@ import pandas as pd
 from skt_lib.config import load_params
 from skt_lib.io import read_table, write_json_atomic
 from skt_lib.schemas import OBJECTS, SUPPORTS
-from skt_lib.sim.contact_sim import reference_task, simulate_hangs
+from skt_lib.sim.contact_sim import eval_damping, reference_task, simulate_hangs
 from stages._common import run_items
 
 #: A spread above this (m) is a label that moves more than the 1 cm the contact metric allows.
@@ -58,7 +58,8 @@ def main(argv=None) -> int:
         return 2
     objects = read_table(src / "objects.parquet", OBJECTS)
     ref = objects[objects["is_reference"]].iloc[0]
-    tasks = [reference_task(s, ref, src, seed, p) for seed in seeds for s in supports.itertuples()]
+    tasks = [reference_task(s, ref, src, seed, p, eval_damping(params)) for seed in seeds
+             for s in supports.itertuples()]
     rows, _, failed = run_items(simulate_hangs, tasks, params.compute, "reference drops")
     labels: dict[str, list] = {}
     for r in rows:

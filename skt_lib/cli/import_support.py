@@ -35,7 +35,7 @@ from skt_lib.io import read_table, write_json_atomic
 from skt_lib.perception.views import RenderTask, render_support
 from skt_lib.planning.skts import REACH_TOL_M, SktTask, load_probe_objects, plan_support_skts
 from skt_lib.schemas import OBJECTS
-from skt_lib.sim.contact_sim import HangTask, simulate_hangs
+from skt_lib.sim.contact_sim import HangTask, eval_damping, simulate_hangs
 
 #: Half-width (m, along y) of the wall plate added to a mesh that does not touch the wall.
 PLATE_HALF_Y_M = 0.02
@@ -135,7 +135,7 @@ def import_support(args, params, bar) -> dict:
             name, "reference_on_support", ref_row.object_id,
             str(root / "mesh_gen" / ref_row.urdf_path),
             ref_row.aperture_clearance_m, name, str(paths["urdf"]), tuple(map(tuple, arm.points)),
-            tuple(diff.hang_point), arm.radius, seed, cs))
+            tuple(diff.hang_point), arm.radius, seed, cs, eval_damping(params)))
         if not hang["ok"]:
             raise MeshError(f"{args.mesh}: the reference object does not hang on it "
                             f"({hang['failure_reason']}; {hang['n_success']}/{hang['n_attempts']} "

@@ -12,9 +12,15 @@ Each run makes ``n_drops`` releases from random collision-free poses threaded on
 every release is dropped, perturbed and judged by the predicate of
 :mod:`skt_lib.sim.hanging`. Of the successful hangs the most consistent one (the medoid
 of the contact points) is kept; its pose is nudged to ``goal_clearance_m`` clearance and
-checked to survive the perturbation again from rest.
+checked to survive the perturbation again from rest — a support's under the evaluation's
+physics (``sim_eval``'s undamped tilts, :func:`perturb_as_evaluated`), so that no goal of the
+planner is a hang the evaluation would drop. Where the medoid fails that, the next most
+consistent hang is tried (``goal_rank``: which one became the goal); where none passes, the
+drops are made again at hang points moved back along the arm toward the wall
+(:data:`FALLBACK_SHIFTS_M`; ``goal_shift_m``).
 """
 
+import dataclasses
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +31,7 @@ import pybullet as pb
 from skt_lib.config import ContactSimParams
 from skt_lib.geometry.se3 import matrix_pose, pose_matrix, random_rotation_small
 from skt_lib.seeding import item_rng
-from skt_lib.sim.hanging import G, HangCheck, Perturbation, check_hang, perturb
+from skt_lib.sim.hanging import G, HangCheck, Perturbation, check_hang, perturb, perturb_phases
 from skt_lib.sim.world import SUPPORT_POSE_WORLD, World
 
 ROD_LENGTH_M = 0.25
@@ -53,6 +59,29 @@ class HangTask:
     arm_radius_m: float  # arm section radius
     seed: int
     params: ContactSimParams
+    #: the evaluation's object damping (linear, angular, settle linear, settle angular; 1/s,
+    #: ``sim_eval``'s): a support's goal is judged by it (:func:`eval_damping`); ``None``
+    #: judges it at ``params``' damping throughout (objects on the rod)
+    eval_damping: tuple[float, float, float, float] | None = None
+
+
+def eval_damping(params) -> tuple[float, float, float, float]:
+    """The object damping ``sim_eval`` perturbs and settles at (``params``: all stages'):
+    the physics a reference hang must pass to become a planner's goal."""
+    e = params.sim_eval
+    return (e.linear_damping, e.angular_damping, e.settle_linear_damping, e.settle_angular_damping)
+
+
+def perturb_as_evaluated(world: World, obj: int, pert: Perturbation,
+                         damping: tuple[float, float, float, float]) -> None:
+    """:func:`~skt_lib.sim.hanging.perturb` with ``obj`` at the evaluation's damping: the
+    tilts at ``damping[:2]``, the settle at ``damping[2:]`` (``sim_eval``'s executor does the
+    same); ``obj``'s damping is left at the settle's."""
+    for i, (gravity, steps) in enumerate(perturb_phases(pert)):
+        lin, ang = damping[2:] if i == len(perturb_phases(pert)) - 1 else damping[:2]
+        pb.changeDynamics(obj, -1, linearDamping=lin, angularDamping=ang, physicsClientId=world.cid)
+        world.set_gravity_support(gravity)
+        world.step(steps)
 
 
 def perturbation(p: ContactSimParams) -> Perturbation:
@@ -126,14 +155,15 @@ def release_pose(rng: np.random.Generator, task: HangTask, attempt: int = 0) -> 
     return out
 
 
-def reference_task(support, ref, src: Path, seed: int, p: ContactSimParams) -> HangTask:
+def reference_task(support, ref, src: Path, seed: int, p: ContactSimParams,
+                   damping: tuple[float, float, float, float]) -> HangTask:
     """The ``reference_on_support`` run of the reference object ``ref`` (a row of the objects
     table) on ``support`` (a row of the supports table); ``src``: the mesh_gen folder their
-    paths are relative to."""
+    paths are relative to; ``damping``: the evaluation's (:func:`eval_damping`)."""
     return HangTask(support.support_id, "reference_on_support", ref.object_id,
                     str(src / ref.urdf_path), ref.aperture_clearance_m, support.support_id,
                     str(src / support.urdf_path), tuple(map(tuple, support.arm_centreline)),
-                    tuple(support.hang_point), support.radius_m, seed, p)
+                    tuple(support.hang_point), support.radius_m, seed, p, damping)
 
 
 def _clear(world: World, obj: int, others: list[int], clearance: float) -> bool:
@@ -157,15 +187,79 @@ def _push_clear(world: World, obj: int, support: int, clearance: float) -> float
     return world.min_distance(obj, support)
 
 
-def _medoid(points: list[np.ndarray], tol: float) -> tuple[int, int]:
-    """Index of the point with most neighbours within ``tol`` (ties: smallest summed
-    distance, then lowest index), and that neighbour count (itself included)."""
+def _by_consistency(points: list[np.ndarray], tol: float) -> list[tuple[int, int]]:
+    """``(index, neighbours within tol, itself included)`` of every point, the medoid first:
+    most neighbours, then smallest summed distance, then lowest index."""
     p = np.asarray(points)
     d = np.linalg.norm(p[:, None] - p[None], axis=2)
     support = (d <= tol).sum(1)
-    key = [(-support[i], d[i].sum(), i) for i in range(len(p))]
-    best = min(key)[2]
-    return best, int(support[best])
+    order = sorted(range(len(p)), key=lambda i: (-support[i], d[i].sum(), i))
+    return [(i, int(support[i])) for i in order]
+
+
+#: Where no hang of the drops passes the evaluation's physics, a support's drops are made
+#: again this far (path length) back along the arm toward the wall, nearest first (m): a
+#: ring that slides off a peg's end under the undamped tilts stays nearer the wall.
+FALLBACK_SHIFTS_M = (0.01, 0.02, 0.03)
+
+
+def _drops(world: World, obj: int, support: int, wall: int, task: HangTask,
+           rng: np.random.Generator, pert: Perturbation) -> tuple[list, Counter]:
+    """``n_drops`` releases at ``task``'s hang point, dropped, perturbed (the drops' damping)
+    and judged: the successful ``(check, pose)`` and the failure reasons."""
+    p = task.params
+    trials, reasons = [], Counter()
+    for _ in range(p.n_drops):
+        for attempt in range(p.max_init_tries):
+            world.set_pose_support(obj, release_pose(rng, task, attempt))
+            if _clear(world, obj, [support, wall], p.init_clearance_m):
+                break
+        else:
+            reasons["no_release_pose"] += 1
+            continue
+        world.set_gravity_support((0.0, 0.0, -G))
+        world.step(p.drop_steps)
+        perturb(world, pert)
+        check = check_hang(world, obj, support, pert)
+        if check.ok:
+            trials.append((check, world.pose_support(obj)))
+        else:
+            reasons[check.reason] += 1
+    return trials, reasons
+
+
+def _goal(world: World, obj: int, support: int, task: HangTask, trials: list,
+          pert: Perturbation) -> dict:
+    """The goal among ``trials``: the most consistent hang, nudged clear of the support, that
+    hangs again from rest — a support's under the evaluation's physics (undamped tilts), so
+    no goal is one sim_eval would drop; where one does not, the next most consistent is
+    tried. A dict: ``ok``, ``failure_reason``, ``goal_rank``, ``n_consistent``,
+    ``goal_clearance_m``, and when ok ``check`` and ``goal`` (pose, support frame)."""
+    p = task.params
+    key = [c.contact_support if task.support_urdf else c.contact_object for c, _ in trials]
+    out = {"ok": False, "goal_rank": -1}
+    for rank, (best, n_consistent) in enumerate(_by_consistency(key, p.consistency_tol_m)):
+        check, pose = trials[best]
+        world.set_pose_support(obj, pose)
+        clearance = _push_clear(world, obj, support, p.goal_clearance_m)
+        goal = world.pose_support(obj)
+        if task.eval_damping is None:
+            perturb(world, pert)
+        else:
+            perturb_as_evaluated(world, obj, pert, task.eval_damping)
+        again = check_hang(world, obj, support, pert)
+        if task.eval_damping is not None:  # back to the drops' damping
+            pb.changeDynamics(obj, -1, linearDamping=p.linear_damping,
+                              angularDamping=p.angular_damping, physicsClientId=world.cid)
+        out.update(n_consistent=n_consistent, goal_clearance_m=float(clearance))
+        if clearance < p.goal_clearance_m * 0.5:
+            out["failure_reason"] = "goal_not_clear"
+        elif not again.ok:
+            out["failure_reason"] = f"goal_unstable_{again.reason}"
+        else:
+            return out | {"ok": True, "failure_reason": "", "goal_rank": rank, "check": check,
+                          "goal": goal}
+    return out
 
 
 def simulate_hangs(task: HangTask) -> dict:
@@ -182,46 +276,30 @@ def simulate_hangs(task: HangTask) -> dict:
         obj = world.load(task.object_urdf, _PARK, fixed=False, friction=p.friction,
                          linear_damping=p.linear_damping, angular_damping=p.angular_damping)
 
-        trials: list[tuple[HangCheck, np.ndarray]] = []
-        reasons: Counter = Counter()
-        for _ in range(p.n_drops):
-            for attempt in range(p.max_init_tries):
-                world.set_pose_support(obj, release_pose(rng, task, attempt))
-                if _clear(world, obj, [support, wall], p.init_clearance_m):
-                    break
-            else:
-                reasons["no_release_pose"] += 1
-                continue
-            world.set_gravity_support((0.0, 0.0, -G))
-            world.step(p.drop_steps)
-            perturb(world, pert)
-            check = check_hang(world, obj, support, pert)
-            if check.ok:
-                trials.append((check, world.pose_support(obj)))
-            else:
-                reasons[check.reason] += 1
-
+        trials, reasons = _drops(world, obj, support, wall, task, rng, pert)
         row = _empty_row(task, n_success=len(trials))
         if not trials:
             row["failure_reason"] = reasons.most_common(1)[0][0] if reasons else "no_release_pose"
             return row
-        key = [c.contact_support if task.support_urdf else c.contact_object for c, _ in trials]
-        best, n_consistent = _medoid(key, p.consistency_tol_m)
-        check, pose = trials[best]
-
-        # the goal: the kept hang, nudged clear of the support, must hang again from rest
-        world.set_pose_support(obj, pose)
-        clearance = _push_clear(world, obj, support, p.goal_clearance_m)
-        goal = world.pose_support(obj)
-        perturb(world, pert)
-        again = check_hang(world, obj, support, pert)
-        row.update(n_consistent=n_consistent, goal_clearance_m=float(clearance))
-        if clearance < p.goal_clearance_m * 0.5:
-            row["failure_reason"] = "goal_not_clear"
+        found, shift = _goal(world, obj, support, task, trials, pert), 0.0
+        if not found["ok"] and task.eval_damping is not None:
+            # no hang here passes the evaluation: another hang point, back along the arm
+            for shift in FALLBACK_SHIFTS_M:
+                site, _ = arm_site(np.asarray(task.arm, float), np.asarray(task.hang_point, float),
+                                   -shift)
+                moved = dataclasses.replace(task, hang_point=tuple(map(float, site)))
+                more, _ = _drops(world, obj, support, wall, moved, rng, pert)
+                if more:
+                    found = _goal(world, obj, support, moved, more, pert)
+                    if found["ok"]:
+                        break
+        row.update(failure_reason=found.get("failure_reason", row["failure_reason"]),
+                   goal_rank=found["goal_rank"], goal_shift_m=shift if found["ok"] else float("nan"))
+        if "n_consistent" in found:
+            row.update(n_consistent=found["n_consistent"], goal_clearance_m=found["goal_clearance_m"])
+        if not found["ok"]:
             return row
-        if not again.ok:
-            row["failure_reason"] = f"goal_unstable_{again.reason}"
-            return row
+        check, goal = found["check"], found["goal"]
         pos, quat = matrix_pose(goal)
         row.update(
             ok=True,
@@ -251,4 +329,6 @@ def _empty_row(task: HangTask, n_success: int) -> dict:
         "hang_position": nan3,
         "hang_quat": [float("nan")] * 4,
         "goal_clearance_m": float("nan"),
+        "goal_rank": -1,
+        "goal_shift_m": float("nan"),
     }

@@ -12,6 +12,7 @@ from skt_lib.labels.affordance import hanging_part, segmentation_map_naive
 from skt_lib.perception.views import RENDER_SPEC
 from skt_lib.schemas import CONTACTS, LABELS, SKTS, SUPPORTS
 from stages import clustering, render_views
+from tests.conftest import TINY
 
 pytestmark = pytest.mark.slow
 
@@ -88,7 +89,8 @@ def test_affordance_contract(tiny_dataset):
 def test_clustering_contract_and_determinism(tiny_dataset, tmp_path):
     _, data, reports = tiny_dataset
     m = json.loads((reports / "clustering" / "metrics.json").read_text())
-    assert m["k"] == 3 and len(m["cluster_sizes"]) == 3 and min(m["cluster_sizes"]) > 0
+    k = TINY["clustering"]["k"]
+    assert m["k"] == k and len(m["cluster_sizes"]) == k and min(m["cluster_sizes"]) > 0
     labels = read_table(data / "clustering" / "labels.parquet", LABELS)
     # one SKT per tiny support: the silhouette is over the training supports' embeddings
     train = labels[labels["split"] == "train"]
@@ -97,7 +99,7 @@ def test_clustering_contract_and_determinism(tiny_dataset, tmp_path):
                                                               train["category"].to_numpy()))
     assert set(labels["category"]) <= {0, 1, 2} and labels["is_template"].sum() >= 1
     z = read_npz(data / "clustering" / "templates.npz", {"templates": ("float64", 3)})
-    assert z["templates"].shape == (3, 10, 3) and np.allclose(z["templates"][:, 0], 0)
+    assert z["templates"].shape == (k, 10, 3) and np.allclose(z["templates"][:, 0], 0)
     first, again = _rerun(clustering, tiny_dataset, tmp_path)
     assert (first / "labels.parquet").read_bytes() == (again / "labels.parquet").read_bytes()
     assert (first / "templates.npz").read_bytes() == (again / "templates.npz").read_bytes()

@@ -4,6 +4,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pybullet as pb
 import pytest
 
 from skt_lib.config import load_params
@@ -11,7 +12,8 @@ from skt_lib.geometry.se3 import pose_matrix, skt_rotation
 from skt_lib.io import read_table
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
 from skt_lib.sim.contact_sim import HangTask, arm_site, perturbation, release_pose
-from skt_lib.sim.hanging import check_hang, perturb
+from skt_lib.sim import contact_sim as contact_sim_lib
+from skt_lib.sim.hanging import Perturbation, check_hang, perturb, perturb_phases
 from skt_lib.sim.keypoints import keypoint_from_hang, orthonormality_error
 from skt_lib.sim.world import World
 from stages import contact_sim
@@ -52,7 +54,11 @@ def test_contract_and_success(tiny_dataset):
     m = json.loads((reports / "contact_sim" / "metrics.json").read_text())
     assert m["n_supports"] == len(supports) == 12
     n_objects = 5 * TINY["mesh_gen"]["n_objects_per_category"]
-    assert m["support_success_rate"] >= 0.95 and m["n_objects_ok"] == m["n_objects"] == n_objects
+    # a support fails only where no hang passes the evaluation's perturbation (one easy peg
+    # of the tiny set: the ring slides off it under the undamped tilts)
+    assert m["n_supports_ok"] + sum(m["n_supports_no_eval_stable_hang_by_level"].values()) \
+        == m["n_supports"]
+    assert m["support_success_rate"] >= 0.9 and m["n_objects_ok"] == m["n_objects"] == n_objects
     ok = contacts[contacts["ok"]]
     assert np.isfinite(np.stack(ok["hang_quat"])).all()
     assert (ok["goal_clearance_m"] >= 0.00025).all()  # stored goals are collision-free
@@ -132,3 +138,72 @@ def test_keypoint_rule_on_known_poses():
         skt_rotation([0, 0, -1])
     with pytest.raises(ValueError, match="contact_object"):
         keypoint_from_hang(np.eye(4), [np.nan, 0, 0], 0.05)
+
+
+class _Recorder:
+    """A stand-in world that records each phase: (gravity, steps, damping set before it)."""
+
+    cid = 0
+
+    def __init__(self):
+        self.phases, self.damping, self._gravity = [], None, None
+
+    def set_gravity_support(self, g):
+        self._gravity = tuple(g)
+
+    def step(self, n):
+        self.phases.append((self._gravity, n, self.damping))
+
+
+def test_goal_perturbation_is_the_evaluations_tilts_undamped_settle_damped(monkeypatch):
+    world = _Recorder()
+    monkeypatch.setattr(contact_sim_lib.pb, "changeDynamics",
+                        lambda body, link, linearDamping, angularDamping, physicsClientId:
+                        setattr(world, "damping", (linearDamping, angularDamping)))
+    pert = Perturbation(4.0, 30, 50, 0.02, 0.15, 10)
+    contact_sim_lib.perturb_as_evaluated(world, 7, pert, (0.04, 0.03, 1.0, 5.0))
+    tilts, settle = world.phases[:-1], world.phases[-1]
+    assert [(g, n) for g, n, _ in world.phases] == [(tuple(g), n) for g, n in perturb_phases(pert)]
+    assert all(d == (0.04, 0.03) for _, _, d in tilts) and len(tilts) == 3
+    assert settle[0] == (0.0, 0.0, -contact_sim_lib.G) and settle[2] == (1.0, 5.0)
+
+
+def test_a_supports_goal_is_judged_by_the_evaluations_perturbation(tiny_dataset, monkeypatch):
+    """simulate_hangs runs the goal check through perturb_as_evaluated with the task's
+    (sim_eval's) damping, and every stored goal of the tiny run hangs again under it."""
+    params_path, data, _ = tiny_dataset
+    params = load_params(params_path)
+    supports, objects, contacts = _tables(data)
+    ref = objects[objects["is_reference"]].iloc[0]
+    calls = []
+    real = contact_sim_lib.perturb_as_evaluated
+    monkeypatch.setattr(contact_sim_lib, "perturb_as_evaluated",
+                        lambda w, o, p, d: (calls.append(d), real(w, o, p, d))[1])
+    sid = supports.index[0]
+    task = contact_sim_lib.reference_task(supports.loc[[sid]].reset_index().iloc[0], ref,
+                                          data / "mesh_gen", 1, params.contact_sim,
+                                          contact_sim_lib.eval_damping(params))
+    row = contact_sim_lib.simulate_hangs(task)
+    assert row["ok"] and calls and set(calls) == {contact_sim_lib.eval_damping(params)}
+    assert contact_sim_lib.eval_damping(params)[:2] == (params.sim_eval.linear_damping,
+                                                        params.sim_eval.angular_damping)
+    # every stored goal, re-judged here at sim_eval's damping, hangs
+    p, e = params.contact_sim, params.sim_eval
+    for r in contacts[(contacts["kind"] == "reference_on_support") & contacts["ok"]].itertuples():
+        with World(p.dt, p.solver_iterations) as world:
+            world.add_wall()
+            sup = world.load(str(data / "mesh_gen" / supports.loc[r.support_id, "urdf_path"]),
+                             np.eye(4), fixed=True, friction=p.friction)
+            obj = world.load(str(data / "mesh_gen" / ref["urdf_path"]),
+                             pose_matrix(r.hang_position, r.hang_quat), fixed=False,
+                             friction=p.friction, linear_damping=e.linear_damping,
+                             angular_damping=e.angular_damping)
+            phases = perturb_phases(perturbation(p))
+            for i, (gravity, steps) in enumerate(phases):
+                if i == len(phases) - 1:  # the settle damps, as the executor's
+                    pb.changeDynamics(obj, -1, linearDamping=e.settle_linear_damping,
+                                      angularDamping=e.settle_angular_damping,
+                                      physicsClientId=world.cid)
+                world.set_gravity_support(gravity)
+                world.step(steps)
+            assert check_hang(world, obj, sup, perturbation(p)).ok, r.support_id
