@@ -21,7 +21,7 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import matrix_pose, pose_matrix
 from skt_lib.geometry.skt import arc_length
 from skt_lib.io import read_table, write_table
-from skt_lib.planning.skts import REACH_TOL_M, load_skt_tasks, plan_support_skts
+from skt_lib.planning.skts import REACH_TOL_M, load_skt_tasks, plan_support_skts, skt_diversity_m
 from skt_lib.schemas import OBJECTS, SKTS, SUPPORTS
 from stages._common import item_store, parse_args, run_items
 from viz.report import write_metrics
@@ -85,6 +85,14 @@ def main(argv=None) -> int:
     attempted_by_level = Counter()
     for r in results:
         attempted_by_level[level[r["support_id"]]] += r["n_attempted"]
+    paths = {}  # support → its stored SKTs' keypoints
+    for row in rows:
+        paths.setdefault(row["support_id"], []).append(np.asarray(row["keypoints"]))
+    diversity = {lv: [] for lv in LEVELS}
+    for sid, kps in paths.items():
+        d = skt_diversity_m(kps, params.clustering.T)
+        if d is not None:
+            diversity[level[sid]].append(1000 * d)
     metrics = {
         "n_supports": len(tasks), "n_supports_with_skts": len({r["support_id"] for r in rows}),
         "n_skts": len(rows), "n_attempted": n_attempted,
@@ -95,6 +103,7 @@ def main(argv=None) -> int:
         "xi0_error_max_m": max(xi0_err, default=None),
         "xi0_error_median_m": float(np.median(xi0_err)) if xi0_err else None,
         "skts_by_difficulty": by_level,
+        "skt_diversity_mm_by_level": {lv: float(np.mean(v)) if v else None for lv, v in diversity.items()},
         "failures_by_reason": dict(sorted((failures + Counter(
             {"off_hang": n_off_hang} if n_off_hang else {})).items())),
         "n_supports_crashed": len(crashed),

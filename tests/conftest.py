@@ -25,7 +25,7 @@ TINY = {
     "rotation_extraction": {'front_offset_m': 0.05},
     "render_views": {'n_azimuth': 7, 'n_elevation': 6, 'azimuth_deg': [-60.0, 60.0], 'elevation_deg': [-20.0, 55.0], 'distance_m': 0.35, 'fov_deg': 40.0, 'width': 320, 'height': 240, 'n_points': 1000, 'noise_std_m': 0.0},
     "affordance_maps": {'sigma_m': 0.005, 'alpha': 0.5, 'beta': 0.5, 'hanging_part_m': 0.03, 'visible_tol_m': 0.005},
-    "clustering": {'T': 10, 'k': 3, 'n_init': 10, 'max_iter': 300},
+    "clustering": {'T': 10, 'k': 2, 'n_init': 10, 'max_iter': 300},
     "train": {'epochs': 1, 'views_per_epoch': 1, 'batch_size': 16, 'lr': 0.001, 'lr_final_ratio': 0.05, 'weight_decay': 0.0001, 'val_views': [0], 'centres': [128, 32, 8], 'nsample': 16, 'feat_dim': 64, 'lstm_hidden': 64, 'contact_weight': 0.1, 'hang_taper_waypoints': 0, 'check_families': 0, 'threads': 1},
     "train_baselines": {"models": ["sctdn_cp_feature", "vatmart", "vatmart_mod"], "latent_dim": 16,
                         "hidden": 64, "n_control_points": 4, "vatmart_kl_weight": 0.1, "vatmart_mod_kl_weight": 0.01},
@@ -39,7 +39,7 @@ TINY = {
                  "ik_restarts": 4, "grasp_force_n": 60.0, "retreat_m": 0.08, "retreat_steps": 60,
                  "kpam_pre_hang_m": [0.1, 0.0, 0.0], "kpam_lift_m": 0.01,
                  "n_record": 1, "record_every": 16},
-    "rrt_skts": {'n_skts_per_support': 1, 'n_skts_per_test_support': 1, 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'step_m': 0.01, 'max_turn_deg': 35.0, 'lead_in_m': 0.01, 'max_release_offset_m': 0.004, 'check_step_m': 0.0025, 'clearance_m': 0.0005, 'probe_train_objects': False, 'penetration_tol_m': 0.005, 'goal_bias': 0.2, 'surface_bias': 0.2, 'surface_offset_m': 0.015, 'route_bias': 0.2, 'route_spread_m': 0.003, 'plane_bias': 0.6, 'max_checks': 15000, 'shortcut_steps': 10, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
+    "rrt_skts": {'n_skts_per_support': 1, 'n_skts_per_test_support': 1, 'planner': 'one_tree', 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'step_m': 0.01, 'max_turn_deg': 35.0, 'lead_in_m': 0.01, 'max_release_offset_m': 0.004, 'check_step_m': 0.0025, 'clearance_m': 0.0005, 'probe_train_objects': False, 'penetration_tol_m': 0.005, 'goal_bias': 0.2, 'surface_bias': 0.2, 'surface_offset_m': 0.015, 'route_bias': 0.2, 'route_spread_m': 0.003, 'plane_bias': 0.6, 'max_checks': 15000, 'shortcut_steps': 10, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
 }
 
 

@@ -33,7 +33,17 @@ BENCH_ROWS = {
     "rrt_plan_s_median": ("{:.2f} s", "planning time per SKT attempt (one process per support)"),
     "rrt_recheck_s_median": ("{:.2f} s", "independent re-check time per SKT"),
     "rrt_skts_per_min": ("{:.0f}", "SKTs planned and re-checked per minute of wall time, "
-                                   "`compute.n_workers` workers"),
+                                   "`compute.n_workers` workers: the one-tree planner"),
+    "rrt_plan_s_median_reference": ("{:.2f} s", "planning time per SKT attempt, the per-SKT "
+                                                "reference planner (a fresh search per SKT)"),
+    "rrt_recheck_s_median_reference": ("{:.2f} s", "re-check time per SKT, the reference's SKTs"),
+    "rrt_skts_per_min_reference": ("{:.0f}", "the same supports and SKT count with the "
+                                             "reference planner, same run"),
+    "rrt_speedup_vs_reference_planner": ("{:.1f}×", "the one-tree planner's SKTs per minute over "
+                                                    "the reference's, same run"),
+    "rrt_diversity_mm": ("{}", "mean pairwise distance (mm) of a support's SKTs (T waypoints), "
+                               "per level: the one-tree planner"),
+    "rrt_diversity_mm_reference": ("{}", "the same for the reference planner"),
     "render_ms_per_view_median": ("{:.1f} ms", "ray casting of one view (Open3D), one process"),
     "render_total_ms_per_view_median": ("{:.1f} ms", "the whole view: ray casting, farthest-"
                                                      "point sampling to N, shuffle, NPZ write; "
@@ -53,7 +63,8 @@ BENCH_ROWS = {
     "sim_verdict_agreement": ("{:.3f}", "share of those trials whose verdict (failure reason, "
                                         "or success) both executors agree on"),
 }
-BENCH_SAMPLE = ("machine", "rrt_bench_supports", "rrt_bench_skts", "sim_bench_trials",
+BENCH_SAMPLE = ("machine", "rrt_bench_supports", "rrt_bench_skts", "rrt_bench_skts_reference",
+                "rrt_bench_skts_per_support", "sim_bench_trials",
                 "sim_verdict_disagreements")
 
 PAPER_SKTS = 472 * 50  # the paper preset of docs/presets.md: supports × SKTs per support
@@ -142,8 +153,10 @@ def bench_table(bench: dict) -> str:
     if "machine" in bench:
         sample.append(f"on {bench['machine']}")
     if "rrt_bench_supports" in bench:
-        sample.append(f"planning and rendering on {bench['rrt_bench_supports']} supports balanced "
-                      f"across levels ({bench.get('rrt_bench_skts', '?')} SKTs)")
+        sample.append(f"planning on {bench['rrt_bench_supports']} supports balanced across levels, "
+                      f"{bench.get('rrt_bench_skts_per_support', '?')} SKTs asked of each "
+                      f"({bench.get('rrt_bench_skts', '?')} planned by the one-tree planner, "
+                      f"{bench.get('rrt_bench_skts_reference', '?')} by the reference)")
     if "sim_bench_trials" in bench:
         sample.append(f"simulation over {bench['sim_bench_trials']} oracle trials")
     lines = (["Measured " + "; ".join(sample) + "; medians.", ""] if sample else [])
@@ -151,7 +164,10 @@ def bench_table(bench: dict) -> str:
     unknown = sorted(set(bench) - set(BENCH_ROWS) - set(BENCH_SAMPLE))
     for key in [k for k in BENCH_ROWS if k in bench] + unknown:
         fmt, meaning = BENCH_ROWS.get(key, ("{}", ""))
-        lines.append(f"| `{key}` | {fmt.format(bench[key])} | {meaning} |")
+        value = bench[key]
+        text = (", ".join(f"{k} {'–' if v is None else f'{v:.1f}'}" for k, v in value.items())
+                if isinstance(value, dict) else fmt.format(value))
+        lines.append(f"| `{key}` | {text} | {meaning} |")
     if "sim_verdict_disagreements" in bench:
         differ = bench["sim_verdict_disagreements"]
         lines += ["", "Verdicts the executors disagree on: "

@@ -81,10 +81,19 @@ def write_report(rep: Path, params, metrics: dict, results: list[dict], supports
                 f"(lifted and/or back along the arrival) where the reference does not fit there; samples: {p.goal_bias:.0%} start region, "
                 f"{p.surface_bias:.0%} within {p.surface_offset_m * 1000:.0f} mm of the support's "
                 f"surface, the rest uniform; {p.plane_bias:.0%} of them moved onto the vertical plane "
-                "through the hang that holds the arrival direction).")
-    report.table(["level", "attempted", "reach the hang", "rate"],
+                "through the hang that holds the arrival direction). "
+                + ("One search per support: every SKT of a support is read out of one tree grown "
+                   "from the hang, each joined to its own start in the start region (SKT 0 to its "
+                   "centre)." if p.planner == "one_tree" else
+                   "A fresh search per SKT (the reference planner), every SKT to the start "
+                   "region's centre.")
+                + " Diversity: per support, the mean over pairs of its SKTs of their mean "
+                f"waypoint distance at T = {params.clustering.T}, averaged per level.")
+    div = metrics.get("skt_diversity_mm_by_level", {})
+    report.table(["level", "attempted", "reach the hang", "rate", "SKT diversity (mm)"],
                  [[lv, attempted_by_level[lv], reached[lv],
-                   f"{metrics['reaches_hang_rate_by_level'][lv]:.3f}"] for lv in LEVELS])
+                   f"{metrics['reaches_hang_rate_by_level'][lv]:.3f}",
+                   "–" if div.get(lv) is None else f"{div[lv]:.1f}"] for lv in LEVELS])
     report.heading("Test objects along each test support's first SKT")
     report.text(f"Each test support's first SKT swept with every *test* object at its own keypoint, "
                 f"as executed: {metrics['test_sweep_n_pairs']} pairs, "

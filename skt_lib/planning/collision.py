@@ -43,19 +43,48 @@ class MeshClearance:
         self._obj_radius = float(np.linalg.norm(obj.vertices, axis=1).max())
         self._obj_cells, self._sup_cells = _Cells(obj_pts, CELL_M), _Cells(sup_pts, CELL_M)
 
-    def clearance(self, poses: np.ndarray, chunk: int = 128) -> float:
+    def clearance(self, poses: np.ndarray, chunk: int = 128, max_step_m: float | None = None) -> float:
         """Minimum signed distance (m) over all ``poses (N, 4, 4)``, both sample sets and the
         wall plane, capped at 6 mm (farther is reported as 6 mm); < 0 means a collision.
         Poses are taken ``chunk`` at a time (memory stays bounded on long sweeps).
 
         Only samples of cells (:class:`_Cells`) that can come within reach are moved: the
         result is exactly that of moving every sample (:meth:`clearance_naive`;
-        ``tests/planning/test_collision.py`` holds the two equal, bit for bit, pose by pose)."""
+        ``tests/planning/test_collision.py`` holds the two equal, bit for bit, pose by pose).
+
+        ``max_step_m``: a bound on how far any point of the object moves between consecutive
+        poses (``executed_path``'s step). The clearance is then found without evaluating
+        every pose, and is still exactly the minimum over all of them: every term is a
+        distance of a moved point (or to the moved mesh), so a pose ``m`` steps from one of
+        clearance ``v`` has at least ``v − m·max_step_m``. Every :data:`STRIDE`-th pose is
+        evaluated, then only the poses between two evaluated ones whose bound could fall
+        below the smallest value found (:data:`BOUND_SLACK_M` of slack for float32 distances).
+        The bound is taken on the values capped at :data:`REVERSE_MARGIN_M`: support samples
+        beyond the object's reach + that margin are not evaluated, so only below it is each
+        pose's value the minimum of distances (which move no faster than the points)."""
+        poses = np.asarray(poses).reshape(-1, 4, 4)
+        if max_step_m is None or len(poses) <= 2 * STRIDE:
+            return float(self.per_pose(poses, chunk).min(initial=self._support.shell))
+        coarse = np.unique(np.r_[np.arange(0, len(poses), STRIDE), len(poses) - 1])
+        v = self.per_pose(poses[coarse], chunk)
+        best = float(v.min())
+        gap = np.diff(coarse)
+        capped = np.minimum(v, REVERSE_MARGIN_M)
+        lower = (capped[:-1] + capped[1:] - gap * max_step_m) / 2  # the least any pose between can have
+        refine = [np.arange(a + 1, b) for a, b, low in zip(coarse[:-1], coarse[1:], lower)
+                  if b > a + 1 and low <= best + BOUND_SLACK_M]
+        if refine:
+            best = min(best, float(self.per_pose(poses[np.concatenate(refine)], chunk).min()))
+        return best
+
+    def per_pose(self, poses: np.ndarray, chunk: int = 128) -> np.ndarray:
+        """:meth:`clearance` of each of ``poses (N, 4, 4)`` on its own, ``(N,)``."""
         poses = np.asarray(poses).reshape(-1, 4, 4)
         shell, reach = self._support.shell, self._support.shell + self._support.spacing
-        best = np.inf
+        out = np.full(len(poses), shell)
         for lo in range(0, len(poses), chunk):
             part = poses[lo:lo + chunk]
+            best = out[lo:lo + chunk]  # a view: filled in place
             rot, shift = part[:, :3, :3], part[:, None, :3, 3]
             # object samples (moved) against the support and the wall plane x = 0
             moved = np.einsum("nij,kj->nki", rot, self._obj_cells.centres) + shift
@@ -63,13 +92,13 @@ class MeshClearance:
             keep = (d <= reach) | (moved[..., 0] - self._obj_cells.radii <= shell)
             n, k = self._obj_cells.members(keep)
             obj = np.einsum("nij,nj->ni", rot[n], self._obj_cells.points[k]) + part[n, :3, 3]
-            best = min(best, shell, float(obj[:, 0].min(initial=np.inf)),
-                       self._support.signed_min(obj))
+            np.minimum.at(best, n, obj[:, 0])
+            np.minimum.at(best, n, self._support.signed(obj))
             # support samples within the object's reach (+ 5 mm), in the object frame
             inv_r = np.transpose(rot, (0, 2, 1))
             local = np.einsum("nij,nkj->nki", inv_r, self._sup_cells.centres[None] - shift)
             d = self._sup_cells.distance(local, self._object.samples, reach)
-            ball = self._obj_radius + 0.005
+            ball = self._obj_radius + REVERSE_MARGIN_M
             off = (np.linalg.norm(self._sup_cells.centres[None] - shift, axis=2)
                    - self._sup_cells.radii)
             n, k = self._sup_cells.members((d <= reach) & (off <= ball))
@@ -78,8 +107,8 @@ class MeshClearance:
             n, rel = n[inside], rel[inside]
             if len(n):
                 local = np.einsum("nij,nj->ni", inv_r[n], rel)
-                best = min(best, self._object.signed_min(local))
-        return best
+                np.minimum.at(best, n, self._object.signed(local))
+        return out
 
     def clearance_naive(self, poses: np.ndarray) -> float:
         """:meth:`clearance` moving every sample of both meshes (the reference it equals)."""
@@ -88,7 +117,7 @@ class MeshClearance:
         obj = (np.einsum("nij,kj->nki", poses[:, :3, :3], self._obj_cells.points)
                + poses[:, None, :3, 3]).reshape(-1, 3)
         best = min(shell, float(obj[:, 0].min()), self._support.signed_min(obj))
-        ball = self._obj_radius + 0.005
+        ball = self._obj_radius + REVERSE_MARGIN_M
         for pose in poses:
             rel = self._sup_cells.points - pose[:3, 3]
             rel = rel[np.einsum("ni,ni->n", rel, rel) <= ball * ball]
@@ -97,6 +126,13 @@ class MeshClearance:
         return best
 
 
+#: :meth:`MeshClearance.clearance` with a step bound evaluates every STRIDE-th pose first.
+STRIDE = 4
+#: Support samples farther than the object's radius + this from its frame are not checked
+#: against it (they are farther than this from every object point).
+REVERSE_MARGIN_M = 0.005
+#: Slack (m) on the Lipschitz bound of the refinement: Open3D's distances are float32.
+BOUND_SLACK_M = 1e-5
 #: Edge of the cells (m) samples are grouped in, so that whole cells out of reach are skipped
 #: before any of their samples is moved (:class:`_Cells`).
 CELL_M = 0.01
@@ -143,23 +179,28 @@ class _Exact:
     def __init__(self, scene, samples: cKDTree, spacing: float, shell: float = 0.006):
         self.scene, self.samples, self.spacing, self.shell = scene, samples, spacing, shell
 
-    def signed_min(self, points: np.ndarray) -> float:
-        """Smallest signed distance of ``points`` to the mesh (negative inside).
-
-        Points farther than ``shell + spacing`` from every surface sample are farther than
-        ``shell`` from the surface and, as every part of a penetrating body that crosses the
-        surface has samples that close to it, cannot hide a collision: they only bound the
-        result from below. The rest get an exact distance and a ray-parity inside test."""
+    def signed(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance of each of ``points`` to the mesh (negative inside), capped at
+        ``shell``: points farther than ``shell + spacing`` from every surface sample are
+        farther than ``shell`` from the surface and, as every part of a penetrating body that
+        crosses the surface has samples that close to it, cannot hide a collision: they get
+        ``shell``. The rest get an exact distance and a ray-parity inside test."""
+        out = np.full(len(points), self.shell)
         reach = self.shell + self.spacing
         lo, hi = self.samples.mins - reach, self.samples.maxes + reach
         boxed = np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1))  # cheap pre-filter
         if not len(boxed):
-            return self.shell
+            return out
         near, _ = self.samples.query(points[boxed], distance_upper_bound=reach)
         close = boxed[np.isfinite(near)]
         if not len(close):
-            return self.shell
+            return out
         pts = o3d.core.Tensor(points[close].astype(np.float32))
         d = self.scene.compute_distance(pts).numpy()
         inside = self.scene.compute_occupancy(pts, nsamples=3).numpy() > 0.5  # ray majority vote
-        return float(min(np.where(inside, -d, d).min(), self.shell))
+        out[close] = np.minimum(np.where(inside, -d, d), self.shell)
+        return out
+
+    def signed_min(self, points: np.ndarray) -> float:
+        """Smallest of :meth:`signed` (``shell`` for no point)."""
+        return float(self.signed(points).min(initial=self.shell))

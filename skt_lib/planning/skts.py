@@ -31,7 +31,8 @@ from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
 from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn
 from skt_lib.planning.route import arm_route, route_sampler
-from skt_lib.planning.threading import ThreadingFailed, ThreadSettings, densify, plan_threading
+from skt_lib.planning.threading import (ThreadingFailed, ThreadSettings, densify, plan_threading,
+                                        plan_threading_many)
 from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
 from skt_lib.seeding import item_rng
@@ -147,10 +148,23 @@ def _radius(mesh, keypoint: np.ndarray) -> float:
     return float(np.linalg.norm(mesh.vertices - keypoint[:3, 3], axis=1).max())
 
 
-def sweep_clearance(checker: MeshClearance, frames: np.ndarray, keypoint: np.ndarray) -> float:
+def sweep_clearance(checker: MeshClearance, frames: np.ndarray, keypoint: np.ndarray,
+                    max_step_m: float | None = None) -> float:
     """Signed clearance (m, < 0: penetration) of an object whose keypoint frame follows
-    ``frames (M, 4, 4)``, by the independent mesh check."""
-    return checker.clearance(frames @ invert(keypoint))
+    ``frames (M, 4, 4)``, by the independent mesh check; ``max_step_m``: how far any point of
+    the object moves at most between consecutive frames (``executed_path``'s step), which
+    lets the check skip poses that cannot hold the minimum (the result is the same)."""
+    return checker.clearance(frames @ invert(keypoint), max_step_m=max_step_m)
+
+
+def skt_diversity_m(keypoints: list[np.ndarray], T: int) -> float | None:
+    """How much one support's SKTs differ: the mean, over pairs of SKTs, of the mean distance
+    (m) between their waypoints resampled to ``T``; ``None`` with fewer than two SKTs."""
+    if len(keypoints) < 2:
+        return None
+    w = np.stack([resample(np.asarray(k, float), T) for k in keypoints])  # (n, T, 3)
+    d = np.linalg.norm(w[:, None] - w[None], axis=3).mean(axis=2)  # (n, n)
+    return float(d[np.triu_indices(len(w), 1)].mean())
 
 
 def n_attempts(p: RrtSktsParams, split: str) -> int:
@@ -158,6 +172,53 @@ def n_attempts(p: RrtSktsParams, split: str) -> int:
     the oracle's choices in ``sim_eval`` (the support's generator draws them in order, so the
     first ``n_skts_per_support`` are the ones any split would get)."""
     return p.n_skts_per_test_support if split == "test" else p.n_skts_per_support
+
+
+#: The R_3 additive recurrence (a low-discrepancy sequence; 1/φ_3, φ_3 the root of
+#: x⁴ = x + 1): start i of a support lies at (0.5 + i·α) mod 1 of its region, so the starts
+#: cover the region evenly and none depends on how many are asked for.
+_PHI3 = 1.2207440846057596
+_R3_ALPHA = 1.0 / _PHI3 ** np.arange(1, 4)
+
+
+def start_points(n: int, centre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` starts of a support's SKTs in the box ``[lo, hi]``: the region's centre
+    ``centre`` first (exactly: it is the per-SKT planner's canonical start), then the points
+    of :data:`_R3_ALPHA`'s sequence."""
+    u = (0.5 + np.outer(np.arange(n), _R3_ALPHA)) % 1.0
+    out = lo + u * (hi - lo)
+    out[:1] = centre
+    return out
+
+
+def _plan(task: SktTask, goal, n: int, in_start, sample_start, lower, upper, collides, settings,
+          rng, centre, box, near, route):
+    """``(index, dense SKT | None, failure reason | None, plan seconds, pose checks)`` for SKT
+    attempts ``0 … n − 1``, by ``task.params.planner``: one tree for all (each to its own
+    start; SKT 0's seconds and checks include the tree's threading) or a fresh search each
+    (each to ``centre``)."""
+    if task.params.planner == "per_skt":
+        for index in range(n):
+            t0 = time.perf_counter()
+            try:
+                dense, checks = plan_threading(goal, in_start, sample_start, lower, upper,
+                                               collides, settings, rng, centre, near, route)
+                yield index, dense, None, time.perf_counter() - t0, checks
+            except ThreadingFailed as err:
+                yield index, None, err.reason, time.perf_counter() - t0, 0
+        return
+    t0 = time.perf_counter()
+    skts = plan_threading_many(goal, start_points(n, centre, *box), in_start, sample_start,
+                               lower, upper, collides, settings, rng, near, route)
+    used = 0
+    try:
+        for index, (dense, reason, checks) in enumerate(skts):
+            yield index, dense, reason, time.perf_counter() - t0, checks - used
+            t0, used = time.perf_counter(), checks
+    except ThreadingFailed as err:  # no tree: every attempt fails for the same reason
+        spent = time.perf_counter() - t0
+        for index in range(n):
+            yield index, None, err.reason, spent / n, 0
 
 
 def plan_support_skts(task: SktTask) -> dict:
@@ -196,22 +257,19 @@ def plan_support_skts(task: SktTask) -> dict:
         sup = world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5)
         probe = add_probe(world, [ProbeObject(o.collision, o.keypoint) for o in probe_objs])
         collides = make_probe_collision_fn(world, probe, [sup, wall], p.clearance_m, p.penetration_tol_m)
-        for index in range(n_attempts(p, task.split)):
-            t0 = time.perf_counter()
-            try:
-                path, n_checks = plan_threading(goal, in_start, sample_start, lower, upper, collides,
-                                                 settings, rng, k_goal + (lo_off + hi_off) / 2,
-                                                 near, route)
-            except ThreadingFailed as err:
-                plan_s.append(time.perf_counter() - t0)
-                failures[err.reason] += 1
+        attempts = _plan(task, goal, n_attempts(p, task.split), in_start, sample_start, lower, upper,
+                         collides, settings, rng, k_goal + (lo_off + hi_off) / 2,
+                         (k_goal + lo_off, k_goal + hi_off), near, route)
+        for index, path, reason, seconds, n_checks in attempts:
+            plan_s.append(seconds)
+            if path is None:
+                failures[reason] += 1
                 continue
-            plan_s.append(time.perf_counter() - t0)
             n_planned += 1
             dense = densify(path, p.dense_step_m)  # the same polyline: resampling is unchanged
             t1 = time.perf_counter()
             executed = executed_path(resample(dense, task.T), p.recheck_step_m, ref_radius)
-            clearance = sweep_clearance(checker, executed, ref_kp)
+            clearance = sweep_clearance(checker, executed, ref_kp, p.recheck_step_m)
             recheck_s.append(time.perf_counter() - t1)
             if clearance <= 0.0:
                 failures["recheck_collision"] += 1
@@ -226,7 +284,7 @@ def plan_support_skts(task: SktTask) -> dict:
             mesh, kp = read_obj(o.mesh)[0], _kp(o)
             frames = executed_path(waypoints, p.recheck_step_m, _radius(mesh, kp))
             sweeps.append({"object_id": o.object_id, "clearance_m": sweep_clearance(
-                MeshClearance(support_mesh, mesh, p.recheck_spacing_m), frames, kp)})
+                MeshClearance(support_mesh, mesh, p.recheck_spacing_m), frames, kp, p.recheck_step_m)})
     return {"support_id": task.support_id, "skts": skts, "failures": dict(failures),
             "plan_s": plan_s, "recheck_s": recheck_s, "n_planned": n_planned,
             "n_recheck_ok": n_recheck_ok, "n_attempted": n_attempts(p, task.split), "test_sweeps": sweeps}

@@ -42,7 +42,10 @@ give it:
   before it, so every segment whose frames change is re-checked), resampled to the evaluated
   ``T`` waypoints, and checked once more as executed at that resolution; a path that fails
   there is dropped and a fresh tree grows (the same budget). What passes is what
-  ``sim_eval`` executes.
+  ``sim_eval`` executes;
+- :func:`plan_threading_many` reads many SKTs out of **one** tree (every SKT of a support
+  ends at the same hang, and the threading from it is the costly part): each SKT takes a
+  leaf of its own and its own start, and is joined, shortcut and checked as above.
 
 Deterministic: the caller's generator drives every sample; the budget is counted in checks.
 """
@@ -120,6 +123,41 @@ def exec_frames(points: np.ndarray) -> np.ndarray:
     return skt_frames(points[::-1])[::-1]
 
 
+def exec_frames_kept(points: np.ndarray, old_frames: np.ndarray, m: int) -> np.ndarray:
+    """:func:`exec_frames` of ``points`` whose hang side ``points[m:]`` is the last ``N − m``
+    vertices of a path whose frames were ``old_frames``: frames are carried from the hang
+    outward, so those of vertices ``m + 1 …`` are the old ones and only the rest are
+    transported anew — with :func:`~skt_lib.geometry.skt.skt_frames`' own steps, so the
+    result is bit for bit the full computation's (``tests/planning/test_many_skts.py``)."""
+    n = len(points)
+    if m >= n - 2 or m < 0:
+        return exec_frames(points)
+    head = points[: m + 2][::-1]  # the changed part, hang side first, with one kept vertex
+    motion = head[:-1] - head[1:]
+    motion = np.vstack([motion, motion[-1:]])
+    norm = np.linalg.norm(motion, axis=1)
+    if not np.all(norm >= 1e-12):
+        return exec_frames(points)
+    t = motion / norm[:, None]
+    t[0] = old_frames[-(n - m - 1), :3, 0]  # the motion arriving at the first kept vertex
+    y = np.empty_like(t)
+    y[0] = old_frames[-(n - m - 1), :3, 1]
+    for i in range(1, len(t)):  # skt_frames' double reflection, outward from the kept part
+        r, v2 = y[i - 1], t[i] + t[i - 1]
+        c2 = float(v2 @ v2)
+        if c2 > 1e-24:
+            r = r - (2.0 * float(v2 @ r) / c2) * v2
+        r = r - float(r @ t[i]) * t[i]
+        y[i] = r / np.linalg.norm(r)
+    out = np.empty((n, 4, 4))
+    out[m + 1:] = old_frames[-(n - m - 1):]
+    new = np.tile(np.eye(4), (m + 1, 1, 1))
+    new[:, :3, :3] = np.stack([t[1:], y[1:], np.cross(t[1:], y[1:])], axis=2)[::-1]
+    new[:, :3, 3] = points[: m + 1]
+    out[: m + 1] = new
+    return out
+
+
 def _quat(r: np.ndarray) -> np.ndarray:
     """xyzw quaternion of a rotation matrix, without scipy's per-call overhead (Shepperd)."""
     t = r[0, 0] + r[1, 1] + r[2, 2]
@@ -189,17 +227,23 @@ class _Checker:
         from a path already checked: ``old (N,)`` gives each vertex's index in that path (−1:
         a new vertex) and ``old_frames`` that path's executed frames. A segment is checked
         when an end is new or its frame changed (transport carries a change outward). Returns
-        the new frames ``(N, 4, 4)``, or ``None`` when a checked pose collides."""
-        frames = exec_frames(points)
+        the new frames ``(N, 4, 4)``, or ``None`` when a checked pose collides. Segments with
+        a new end are checked first (the verdict does not depend on the order)."""
+        tail = len(old_frames) - len(points) + np.arange(len(points))  # old index if kept
+        kept = np.flatnonzero(old != tail)
+        frames = exec_frames_kept(points, old_frames, int(kept[-1]) + 1 if len(kept) else 0)
         same = np.zeros(len(points), bool)
         known = old >= 0
         same[known] = np.all(np.abs(frames[known, :3, :3] - old_frames[old[known], :3, :3]) < 1e-9,
                              axis=(1, 2))
         if not same[0] and not self.frames(frames[:1]):
             return None
-        for k in range(len(points) - 1):
-            if same[k] and same[k + 1] and old[k + 1] == old[k] + 1:
-                continue
+        todo = [k for k in range(len(points) - 1)
+                if not (same[k] and same[k + 1] and old[k + 1] == old[k] + 1)]
+        # new stretches first: a shortcut through the support fails there, before the rest
+        # of the path (whose frames it rolled) is checked; the verdict is the same either way
+        todo.sort(key=lambda k: old[k] >= 0 and old[k + 1] >= 0)
+        for k in todo:
             if not self.segment(points[k], points[k + 1], frames[k][:3, :3], frames[k + 1][:3, :3]):
                 return None
         return frames
@@ -225,7 +269,6 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
     surface (drawn with ``surface_bias``); ``sample_route(rng)``: a position near the arm's
     threading route (:mod:`skt_lib.planning.route`, drawn with ``route_bias``, never moved
     onto the threading plane). Raises :class:`ThreadingFailed`."""
-    turn = np.radians(s.max_turn_deg)
     check = _Checker(collides, s)
     sampler = _Sampler(sample_start, sample_near, lower, upper, s,
                        threading_plane(goal) if s.plane_bias > 0 else None, sample_route)
@@ -234,21 +277,17 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
         while True:  # fresh trees from this release until one survives resampling (one budget)
             n_before = check.n
             try:
-                path = _grow(lead, a0, r0, in_start, sampler, lower, upper, check, s, rng)
+                tree = _Tree(lead, a0, r0, lower, upper, check, s)
+                leaf = tree.grow(in_start, sampler, rng, s.max_checks)
             except ThreadingFailed:
                 if n_rejected:
                     raise ThreadingFailed(f"{n_rejected} path(s) collided once resampled to "
                                           f"T = {s.T}; budget spent", "resample_collision") from None
                 raise
-            if path is None:
+            if leaf is None:
                 break  # stuck: next release
-            frames = exec_frames(path)
-            if start_point is not None:
-                path, frames = _snap_start(path, frames, np.asarray(start_point, float), check, s, turn)
-            path = _shortcut(path, frames, check, s, turn, rng)
-            dense = densify(path, s.step_m)[::-1]  # ξ_0 first
-            final = executed_path(resample(dense, s.T), s.check_step_m, s.probe_radius_m)
-            if check.frames(final):
+            dense = _read_out(tree, leaf, start_point, check, s, rng)
+            if dense is not None:
                 return dense, check.n
             n_rejected += 1
             if check.n == n_before:  # nothing new can come from this release
@@ -257,6 +296,107 @@ def plan_threading(goal: np.ndarray, in_start: Callable[[np.ndarray], bool],
         raise ThreadingFailed(f"{n_rejected} path(s) collided once resampled to T = {s.T}",
                               "resample_collision")
     raise ThreadingFailed("the tree could not leave any clear release", "stuck")
+
+
+def _read_out(tree: "_Tree", leaf: int, start_point, check: _Checker, s: ThreadSettings,
+              rng: np.random.Generator) -> np.ndarray | None:
+    """The SKT of ``leaf``: its chain to the root joined to ``start_point`` (when given),
+    shortcut, resampled to ``T`` and checked once more as executed; dense, ξ_0 first, or
+    ``None`` when the resampled execution collides."""
+    turn = np.radians(s.max_turn_deg)
+    path = tree.chain(leaf)
+    frames = exec_frames(path)
+    if start_point is not None:
+        path, frames = _snap_start(path, frames, np.asarray(start_point, float), check, s, turn)
+    path = _shortcut(path, frames, check, s, turn, rng)
+    dense = densify(path, s.step_m)[::-1]  # ξ_0 first
+    final = executed_path(resample(dense, s.T), s.check_step_m, s.probe_radius_m)
+    return dense if check.frames(final) else None
+
+
+#: Leaves of one tree of :func:`plan_threading_many` that may collide once resampled, in a
+#: row, before a fresh tree grows (each further leaf costs only the tree's growth from where
+#: it stands; a fresh tree pays the threading again).
+MISSES_PER_TREE = 4
+#: Leaves an SKT of :func:`plan_threading_many` joins to its own start before it joins the
+#: next ones to SKT 0's (the region's centre): a start whose joined paths keep colliding once
+#: resampled would otherwise spend the SKT's whole budget (measured on support_00001, 50
+#: SKTs: 3 of them took 73k–150k checks, 30 s of the support's 31 s).
+START_TRIES = 2
+#: A further leaf of :func:`plan_threading_many` must come within this share of
+#: ``max_checks`` (the first leaf has the whole budget: it threads the hang).
+LEAF_BUDGET_SHARE = 0.1
+
+
+def plan_threading_many(goal: np.ndarray, starts: np.ndarray,
+                        in_start: Callable[[np.ndarray], bool],
+                        sample_start: Callable[[np.random.Generator], np.ndarray],
+                        lower: np.ndarray, upper: np.ndarray, collides: Callable,
+                        s: ThreadSettings, rng: np.random.Generator,
+                        sample_near: Callable | None = None,
+                        sample_route: Callable | None = None):
+    """``len(starts)`` SKTs from **one** tree (the arguments as :func:`plan_threading`'s),
+    yielded one at a time as ``(dense SKT ξ_0 first | None, failure reason | None, pose checks
+    used so far)``, SKT ``i`` joined to ``starts[i]``.
+
+    Every SKT of a support ends at the same hang, and the costly part of a search is the
+    threading from it — over an upturned tip, through a curl. So one tree is grown backward
+    from the first release it can leave (as :func:`plan_threading`), and each SKT is read out
+    of it: SKT ``i`` takes a leaf of its own (a node in the start region; leaves are never
+    extended, so each is a distinct path), is joined to its own start ``starts[i]``, shortcut
+    with the shared generator, resampled and checked as executed — every check of the
+    per-SKT planner, none shared but the tree's. A further leaf is grown from the tree as it
+    stands (within :data:`LEAF_BUDGET_SHARE` of the budget). A leaf whose resampled
+    execution collides is replaced; after :data:`MISSES_PER_TREE` such leaves in a row (or a
+    tree that gives no further leaf) the tree's trunk is the trouble (a curl whose
+    resampling cuts a corner), and a fresh tree grows from the same release, as the per-SKT
+    planner would. After :data:`START_TRIES` such leaves an SKT is joined to ``starts[0]``
+    instead of its own start. Each SKT has the per-SKT planner's budget, ``max_checks`` pose checks
+    (SKT 0's counted from the start, the tree included); spent, it fails as ``no_path`` or,
+    where leaves were read out but collided once resampled, ``resample_collision``.
+
+    With the same generator state and ``starts[0]`` as :func:`plan_threading`'s
+    ``start_point``, SKT 0 is that planner's SKT (when its first path survives). SKT ``i``
+    depends only on the SKTs before it, not on how many are asked for. Raises
+    :class:`ThreadingFailed` (before the first yield) when no tree leaves any release: then
+    no SKT exists."""
+    starts = np.asarray(starts, float).reshape(-1, 3)
+    check = _Checker(collides, s)
+    sampler = _Sampler(sample_start, sample_near, lower, upper, s,
+                       threading_plane(goal) if s.plane_bias > 0 else None, sample_route)
+    for lead, a0, r0 in _releases(goal[:3, 3], _unit(goal[:3, 0]), check, s):
+        tree = _Tree(lead, a0, r0, lower, upper, check, s)
+        leaf = tree.grow(in_start, sampler, rng, s.max_checks)
+        if leaf is not None:
+            break
+    else:
+        raise ThreadingFailed("the tree could not leave any clear release", "stuck")
+    leaf_budget = max(STUCK_CHECKS, int(LEAF_BUDGET_SHARE * s.max_checks))
+    misses = 0  # the current tree's leaves that collided once resampled, in a row
+    for i, start in enumerate(starts):
+        end = s.max_checks if i == 0 else check.n + s.max_checks  # each SKT's budget
+        dense, rejected, reason = None, 0, "no_path"
+        while check.n < end:
+            if leaf is None:
+                fresh = misses >= MISSES_PER_TREE  # its trunk does not survive resampling
+                if fresh:
+                    tree, misses = _Tree(lead, a0, r0, lower, upper, check, s), 0
+                try:
+                    leaf = tree.grow(in_start, sampler, rng, min(
+                        end, check.n + (s.max_checks if fresh else leaf_budget)), stuck=False)
+                except ThreadingFailed:
+                    misses = MISSES_PER_TREE  # this tree gives no more leaves: a fresh one
+                    continue
+            # a start whose joined paths keep colliding once resampled gives way to SKT 0's
+            target = start if rejected < START_TRIES else starts[0]
+            dense, leaf = _read_out(tree, leaf, target, check, s, rng), None
+            if dense is not None:
+                misses = 0
+                break
+            misses, rejected = misses + 1, rejected + 1
+        if dense is None and rejected:
+            reason = "resample_collision"
+        yield dense, (None if dense is not None else reason), check.n
 
 
 @dataclass(frozen=True)
@@ -300,53 +440,83 @@ def threading_plane(goal: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     return np.array(goal[:3, 3], float), normal / length
 
 
-def _grow(lead: np.ndarray, a0: np.ndarray, r0: np.ndarray, in_start, sampler: _Sampler,
-          lower, upper, check: _Checker, s: ThreadSettings,
-          rng: np.random.Generator) -> np.ndarray | None:
-    """Grow the tree backward from the lead-in's far end until a node lies in the start
-    region; the chain to it in execution order (start … ξ_0), or ``None`` when the tree is
-    stuck (fewer than :data:`STUCK_NODES` nodes after :data:`STUCK_CHECKS` checks).
+class _Tree:
+    """The backward tree of one release: grown from the lead-in's far end, nodes at most
+    ``step_m`` apart, each with the frame transported to it (module notes).
 
     Node v (not the root) stores ``dirs[v]``, the execution direction from v to its parent,
     and ``rots[v]``, the SKT frame at its parent when the path runs through v (x = ``dirs[v]``):
-    the parent's own ``rots`` transported onto ``dirs[v]``."""
-    turn = np.radians(s.max_turn_deg)
-    pos = list(lead)
-    dirs = [a0] * len(lead)
-    rots = [r0] * len(lead)
-    parent = [-1] + list(range(len(lead) - 1))
-    first_free = len(lead) - 1  # the root and the lead-in's inside are not extended
-    leaf = len(lead) - 1 if in_start(lead[-1]) else None
-    n0 = check.n
-    while leaf is None:
-        if check.n >= s.max_checks:
-            raise ThreadingFailed(f"no path within {s.max_checks} checks", "no_path")
-        if check.n - n0 > STUCK_CHECKS and len(pos) - len(lead) < STUCK_NODES:
-            return None
-        q = sampler(rng)
-        cand = np.asarray(pos[first_free:])
-        i = first_free + int(np.argmin(np.linalg.norm(cand - q, axis=1)))
-        if np.linalg.norm(q - pos[i]) < 1e-9:
-            continue
-        d = limit_direction(pos[i] - q, dirs[i], turn)  # execution direction new → i
-        new = pos[i] - s.step_m * d
-        if np.any(new < lower) or np.any(new > upper):
-            continue
-        rd = transport(rots[i], d)  # the frame at i (and at the new leaf) with this child
-        if not check.segment(new, pos[i], rd, rd):
-            continue
-        if parent[i] >= 0 and not check.segment(pos[i], pos[parent[i]], rd, rots[i]):
-            continue
-        pos.append(new)
-        dirs.append(d)
-        rots.append(rd)
-        parent.append(i)
-        if in_start(new):
-            leaf = len(pos) - 1
-    chain = [leaf]
-    while parent[chain[-1]] >= 0:
-        chain.append(parent[chain[-1]])
-    return np.asarray([pos[k] for k in chain])
+    the parent's own ``rots`` transported onto ``dirs[v]``. Positions live in a growing array
+    (the nearest-node query is one vectorised distance); a node in the start region is a
+    *leaf*: it ends a path and is never extended, so every later leaf is a path of its own."""
+
+    def __init__(self, lead: np.ndarray, a0: np.ndarray, r0: np.ndarray, lower, upper,
+                 check: _Checker, s: ThreadSettings):
+        self.lower, self.upper, self.check, self.s = lower, upper, check, s
+        self.turn = np.radians(s.max_turn_deg)
+        self.n_lead = len(lead)
+        self._pos = np.empty((max(1024, 2 * len(lead)), 3))
+        self._pos[:len(lead)] = lead
+        self.n = len(lead)
+        self.dirs = [a0] * len(lead)
+        self.rots = [r0] * len(lead)
+        self.parent = [-1] + list(range(len(lead) - 1))
+        self.first_free = len(lead) - 1  # the root and the lead-in's inside are not extended
+        self._closed = np.zeros(len(self._pos), bool)  # leaves: never extended
+
+    def grow(self, in_start, sampler, rng: np.random.Generator, max_checks: int,
+             stuck: bool = True) -> int | None:
+        """Add nodes until one lies in the start region; its index. ``None`` when the tree is
+        stuck (``stuck`` and fewer than :data:`STUCK_NODES` nodes after :data:`STUCK_CHECKS`
+        checks). Raises :class:`ThreadingFailed` when the checks reach ``max_checks``."""
+        check, s = self.check, self.s
+        if self.n == self.n_lead and in_start(self._pos[self.n - 1]):
+            self._closed[self.n - 1] = True
+            return self.n - 1
+        n0 = check.n
+        while True:
+            if check.n >= max_checks:
+                raise ThreadingFailed(f"no path within {max_checks} checks", "no_path")
+            if stuck and check.n - n0 > STUCK_CHECKS and self.n - self.n_lead < STUCK_NODES:
+                return None
+            q = sampler(rng)
+            dist = np.linalg.norm(self._pos[self.first_free:self.n] - q, axis=1)
+            dist[self._closed[self.first_free:self.n]] = np.inf
+            i = self.first_free + int(np.argmin(dist))
+            if not np.isfinite(dist[i - self.first_free]) or dist[i - self.first_free] < 1e-9:
+                continue
+            p_i = self._pos[i]
+            d = limit_direction(p_i - q, self.dirs[i], self.turn)  # execution direction new → i
+            new = p_i - s.step_m * d
+            if np.any(new < self.lower) or np.any(new > self.upper):
+                continue
+            rd = transport(self.rots[i], d)  # the frame at i (and at the new leaf) with this child
+            if not check.segment(new, p_i, rd, rd):
+                continue
+            if self.parent[i] >= 0 and not check.segment(p_i, self._pos[self.parent[i]], rd, self.rots[i]):
+                continue
+            v = self._add(new, d, rd, i)
+            if in_start(new):
+                self._closed[v] = True
+                return v
+
+    def _add(self, p: np.ndarray, d: np.ndarray, r: np.ndarray, parent: int) -> int:
+        if self.n == len(self._pos):
+            self._pos = np.concatenate([self._pos, np.empty_like(self._pos)])
+            self._closed = np.concatenate([self._closed, np.zeros(len(self._closed), bool)])
+        self._pos[self.n] = p
+        self.dirs.append(d)
+        self.rots.append(r)
+        self.parent.append(parent)
+        self.n += 1
+        return self.n - 1
+
+    def chain(self, leaf: int) -> np.ndarray:
+        """Positions from ``leaf`` to the root (execution order: start … ξ_0)."""
+        chain = [leaf]
+        while self.parent[chain[-1]] >= 0:
+            chain.append(self.parent[chain[-1]])
+        return self._pos[chain].copy()
 
 
 #: Arrival directions tried at the release, as (pitch, yaw) offsets in degrees from the
@@ -480,19 +650,38 @@ def _steer(start: np.ndarray, path: np.ndarray, step: float, turn: float,
     return None
 
 
+#: A stretch whose vertices lie this close to the line through its ends is straight (m).
+STRAIGHT_TOL_M = 1e-9
+
+
+def _straight(stretch: np.ndarray) -> bool:
+    """Whether every vertex of ``stretch (n, 3)`` lies on the segment between its ends."""
+    a, b = stretch[0], stretch[-1]
+    ab = b - a
+    length = float(np.linalg.norm(ab))
+    if length < STRAIGHT_TOL_M:
+        return False
+    rel = stretch[1:-1] - a
+    along = rel @ ab / length
+    off = np.linalg.norm(rel - np.outer(along / length, ab), axis=1)
+    return bool(np.all(off <= STRAIGHT_TOL_M) and np.all(along >= 0.0) and np.all(along <= length))
+
+
 def _shortcut(path: np.ndarray, frames: np.ndarray, check: _Checker, s: ThreadSettings,
               turn: float, rng: np.random.Generator) -> np.ndarray:
     """Seeded shortcutting of an execution-ordered path; the final lead-in is kept straight.
     A straight replacement between vertices ``i`` and ``j`` is kept only when it respects the
-    turn limit and its execution is clear wherever its frames change."""
+    turn limit and its execution is clear wherever its frames change; a stretch that is
+    straight already is left as it is (replacing it would only re-space its vertices, at the
+    price of re-checking it)."""
     n_keep = max(1, int(np.ceil(s.lead_in_m / s.step_m)))
     for _ in range(s.shortcut_steps):
         last = len(path) - 1 - n_keep  # vertices after this belong to the lead-in
         if last < 2:
             break
         i, j = sorted(rng.choice(last + 1, size=2, replace=False))
-        if j - i < 2:
-            continue
+        if j - i < 2 or _straight(path[i:j + 1]):
+            continue  # already straight: the shortcut could only move vertices along it
         mid = densify(path[[i, j]], s.step_m)[1:-1]
         cand = np.concatenate([path[: i + 1], mid, path[j:]])
         if not _turns_ok(cand, i, i + len(mid) + 2, turn):

@@ -90,3 +90,33 @@ def test_pruned_clearance_equals_moving_every_sample_bit_for_bit():
         values += [r for _, r in each]
     # grazing poses too, not only deep ones and caps: where skipping decides
     assert min(values) < -0.003 and sum(0 < v < 0.006 for v in values) > 20
+
+
+def test_step_bounded_clearance_is_the_minimum_over_every_pose_bit_for_bit():
+    """With a bound on how far the object moves per pose, clearance evaluates fewer poses
+    (a Lipschitz bound between evaluated ones) and must still return the exact minimum over
+    all of them — on executed sweeps that pass free, graze and penetrate; and it must skip
+    poses, or it saves nothing."""
+    from skt_lib.geometry.skt import executed_path
+
+    rod = box([0.06, 0.0, 0.0], [0.06, 0.003, 0.003])  # an arm out of the wall
+    ring = _ring()
+    check = MeshClearance(rod, ring, SPACING)
+    radius = float(np.linalg.norm(ring.vertices, axis=1).max())
+    rng, evaluated, total, n_all, values = np.random.default_rng(5), [], 0, 0, []
+    real = check.per_pose
+    check.per_pose = lambda poses, chunk=128: (evaluated.append(len(poses)), real(poses, chunk))[1]
+    for trial in range(8):
+        # the ring (flat) slides in over the arm: grazing it (even trials) or pressed into it
+        z = 0.0095 + 0.0006 * trial if trial % 2 == 0 else 0.005
+        knots = np.c_[np.linspace(0.2, 0.07, 5), rng.normal(0, 0.001, 5),
+                      z + rng.normal(0, 0.0003, 5)]
+        poses = executed_path(knots, 0.001, radius)
+        evaluated.clear()
+        fast = check.clearance(poses, max_step_m=0.001)
+        total += sum(evaluated)
+        full = float(real(poses).min())
+        assert fast == full == check.clearance(poses), trial
+        n_all, values = n_all + len(poses), values + [fast]
+    assert min(values) < 0 < max(values) < 0.006  # penetrating and grazing sweeps
+    assert total < 0.8 * n_all, (total, n_all)  # 0.75 measured: a straight arm grazed end to end
