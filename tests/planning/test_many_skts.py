@@ -6,11 +6,10 @@ from the others, and cost far fewer checks than a search per SKT."""
 import numpy as np
 import pytest
 
-from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn
 from skt_lib.planning.skts import skt_diversity_m, start_points
 from skt_lib.planning.threading import exec_frames, exec_frames_kept, plan_threading, plan_threading_many
-from skt_lib.sim.world import World
-from tests.planning.test_threading import PEG_R, SETTINGS, _assert_clear_and_within_limits, _scene
+from tests.planning.test_threading import (PEG_R, SETTINGS, _assert_clear_and_within_limits,
+                                           _scene, probe_collisions)
 
 LO, HI = np.array([0.08, -0.03, 0.0]), np.array([0.14, 0.03, 0.08])
 
@@ -26,12 +25,7 @@ def _run(tmp_path, seed: int, n: int, tip_rise: float = 0.02):
     starts = start_points(n, g + (LO + HI) / 2, g + LO, g + HI)
     args = (lambda q: bool(np.all(q - g >= LO) and np.all(q - g <= HI)),
             lambda r: g + r.uniform(LO, HI), np.array([0.0, -0.1, -0.1]), np.array([0.3, 0.1, 0.2]))
-    with World(1 / 240, 1, with_floor=False) as world:
-        wall = world.add_wall()
-        sup = world.load(str(tmp_path / "sup" / "sup.urdf"), np.eye(4), True, 0.5)
-        probe = add_probe(world, [ProbeObject(str(tmp_path / "ring" / "collision.obj"),
-                                              tuple(k.ravel()))])
-        collides = make_probe_collision_fn(world, probe, [sup, wall], 0.0005, 0.0)
+    with probe_collisions(tmp_path, k) as collides:
         many = list(plan_threading_many(goal, starts, *args, collides, SETTINGS,
                                         np.random.default_rng(seed)))
         rng = np.random.default_rng(seed)

@@ -3,6 +3,8 @@
 a ring down a tall upturned tip, and the checker checks exactly the poses that execution will
 visit."""
 
+from contextlib import contextmanager
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -56,6 +58,18 @@ def _scene(tmp_path, tip_rise: float = 0.0, length: float = 0.13):
     return support, ring_mesh, k
 
 
+@contextmanager
+def probe_collisions(tmp_path, k: np.ndarray):
+    """``collides(position, quat)`` of the ring probe against the toy scene's peg and wall
+    (written by :func:`_scene` under ``tmp_path``), in a PyBullet world open meanwhile."""
+    with World(1 / 240, 1, with_floor=False) as world:
+        wall = world.add_wall()
+        sup = world.load(str(tmp_path / "sup" / "sup.urdf"), np.eye(4), True, 0.5)
+        probe = add_probe(world, [ProbeObject(str(tmp_path / "ring" / "collision.obj"),
+                                              tuple(k.ravel()))])
+        yield make_probe_collision_fn(world, probe, [sup, wall], 0.0005, 0.0)
+
+
 def _plan(tmp_path, seed: int, tip_rise: float = 0.0, settings: ThreadSettings = SETTINGS,
           start: np.ndarray | None = None, length: float = 0.13, hang_x: float = 0.06):
     support, ring_mesh, k = _scene(tmp_path, tip_rise, length)
@@ -63,12 +77,7 @@ def _plan(tmp_path, seed: int, tip_rise: float = 0.0, settings: ThreadSettings =
     hang[:3, 3] = [hang_x, 0.0, PEG_R + 0.001 - k[2, 3]]  # aperture top 1 mm above the peg
     goal = hang @ k
     lo, hi = np.array([0.08, -0.03, 0.0]), np.array([0.14, 0.03, 0.08])
-    with World(1 / 240, 1, with_floor=False) as world:
-        wall = world.add_wall()
-        sup = world.load(str(tmp_path / "sup" / "sup.urdf"), np.eye(4), True, 0.5)
-        probe = add_probe(world, [ProbeObject(str(tmp_path / "ring" / "collision.obj"),
-                                              tuple(k.ravel()))])
-        collides = make_probe_collision_fn(world, probe, [sup, wall], 0.0005, 0.0)
+    with probe_collisions(tmp_path, k) as collides:
         path, n = plan_threading(
             goal, lambda q: bool(np.all(q - goal[:3, 3] >= lo) and np.all(q - goal[:3, 3] <= hi)),
             lambda g: goal[:3, 3] + g.uniform(lo, hi), np.array([0.0, -0.1, -0.1]),
