@@ -29,7 +29,9 @@ from skt_lib.geometry.checks import check_parts, check_solid
 from skt_lib.geometry.convex import Mesh
 from skt_lib.geometry.export import mass_properties, read_obj, write_shape
 from skt_lib.geometry.objects import aperture_clearance
-from skt_lib.geometry.repair import UNITS, decompose, read_mesh, repair
+from skt_lib.geometry.decompose import decompose
+from skt_lib.geometry.repair import UNITS, load_solid
+from skt_lib.geometry.simplify import Simplified
 from skt_lib.geometry.se3 import invert, matrix_to_quat, pose_matrix, transform_points
 from skt_lib.io import write_json_atomic
 from skt_lib.sim.contact_sim import ROD_ARM, ROD_SITE, HangTask, simulate_hangs
@@ -80,8 +82,8 @@ def _aperture(args, mesh: Mesh, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 def import_object(args, params, bar) -> dict:
     name, cs = args.name, params.contact_sim
-    src = read_mesh(args.mesh, args.units)
-    mesh = repair(src, str(args.mesh))
+    solid = load_solid(args.mesh, args.units)
+    mesh = solid.mesh
     bar.update()
     point, axis = _aperture(args, mesh, params.common.seed)
     _, com, _ = mass_properties(mesh, params.mesh_gen.density_kg_m3)
@@ -94,8 +96,8 @@ def import_object(args, params, bar) -> dict:
     bar.update()
     # decomposed in the author's frame (CoACD's voxels are axis-aligned: the author's axes
     # usually follow the shape), then moved rigidly: hulls stay convex
-    parts = [Mesh(transform_points(to_object, h.vertices), h.faces)
-             for h in decompose(mesh, seed=params.common.seed)]
+    hulls, route = decompose(mesh, seed=params.common.seed)
+    parts = [Mesh(transform_points(to_object, h.vertices), h.faces) for h in hulls]
     iou = check_parts(parts, visual, str(args.mesh), min_iou=0.0)
     clearance = aperture_clearance(parts)
     if clearance < cs.rod_radius_m:
@@ -120,7 +122,7 @@ def import_object(args, params, bar) -> dict:
             "name": name, "kind": "object", "source": str(args.mesh), "units": args.units,
             "object_from_source": invert(frame).tolist(),
             "aperture_point_source": point.tolist(), "aperture_axis_source": axis.tolist(),
-            "aperture_clearance_m": clearance, "n_parts": len(parts), "part_iou": iou,
+            "aperture_clearance_m": clearance, **mesh_record(solid, parts, route, iou),
             "mass_kg": mass,
             "keypoint": pose_matrix(kp.position, matrix_to_quat(kp.rotation)).ravel().tolist(),
             "contact_object": list(row["contact_object"]),
@@ -129,6 +131,14 @@ def import_object(args, params, bar) -> dict:
         _move_into_place(Path(tmp), user_dir(args.data_root, "object", name))
     bar.update()
     return record
+
+
+def mesh_record(solid: Simplified, parts, route: str, iou: float) -> dict:
+    """What an import record says of the mesh: its faces as read and as used, the
+    simplification's method and measured Hausdorff distance, the decomposition route."""
+    return {"n_faces_source": solid.faces_before, "n_faces": len(solid.mesh.faces),
+            "simplified_by": solid.method, "simplify_hausdorff_m": solid.hausdorff_m,
+            "decomposition": route, "n_parts": len(parts), "part_iou": iou}
 
 
 def _move_into_place(tmp: Path, dest: Path) -> None:

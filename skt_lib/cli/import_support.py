@@ -5,12 +5,14 @@ The mesh (any format trimesh reads) is scaled to metres (``--units``), repaired 
 mount point on the wall, +x out of the wall, +z up): as it is, or by ``--mount`` and
 ``--out-axis`` (the mesh's +z stays up as far as the out-axis allows). A mesh that reaches
 behind the wall is refused; one that does not touch the wall gets a wall plate
-(:data:`PLATE_HALF_Y_M`, 1 cm thick, 2.5 cm beyond its wall end up and down). Then the
-pipeline's own per-item code, not a copy: CoACD's convex parts and a URDF as ``mesh_gen``
-writes them, the arms and difficulty level from the mesh
-(:func:`skt_lib.geometry.centreline.mesh_difficulty`), the reference object's hang as
-``contact_sim`` drops it, SKTs planned and re-checked as ``rrt_skts`` does, and the 42
-views of ``render_views``. The result lives in ``<data-root>/user/supports/<name>/`` and is
+(:data:`PLATE_HALF_Y_M`, 1 cm thick, 2.5 cm beyond its wall end up and down). A mesh above
+the face budget is simplified first (:mod:`skt_lib.geometry.simplify`). Then the
+pipeline's own per-item code, not a copy: convex parts (:mod:`skt_lib.geometry.decompose`:
+CoACD, or V-HACD where CoACD fails) and a URDF as ``mesh_gen`` writes them, the arms and
+difficulty level from the mesh (:func:`skt_lib.geometry.centreline.hang_candidates`), the
+reference object's hang as ``contact_sim`` drops it and SKTs planned and re-checked as
+``rrt_skts`` does — on the first arm where both succeed (a fork's or rack's prongs are
+tried in turn; ``--arm`` picks one) — and the 42 views of ``render_views``. The result lives in ``<data-root>/user/supports/<name>/`` and is
 written only once everything has passed.
 """
 
@@ -19,15 +21,16 @@ from pathlib import Path
 
 import numpy as np
 
-from skt_lib.cli.import_mesh import _move_into_place, import_parser, run_import
+from skt_lib.cli.import_mesh import _move_into_place, import_parser, mesh_record, run_import
 from skt_lib.cli.items import SUPPORT_RECORD, user_dir
 from skt_lib.errors import InputError, MeshError
 from skt_lib.geometry.build import SUPPORT_RGBA
-from skt_lib.geometry.centreline import mesh_difficulty
+from skt_lib.geometry.centreline import hang_candidates
 from skt_lib.geometry.checks import check_parts, check_solid
 from skt_lib.geometry.convex import Mesh, box, union
 from skt_lib.geometry.export import read_obj, write_shape
-from skt_lib.geometry.repair import UNITS, decompose, read_mesh, repair
+from skt_lib.geometry.decompose import decompose
+from skt_lib.geometry.repair import UNITS, load_solid
 from skt_lib.geometry.se3 import pose_matrix, transform_points
 from skt_lib.geometry.skt import arc_length
 from skt_lib.geometry.supports import PLATE_THICKNESS_M
@@ -112,16 +115,49 @@ def _reference(root: Path):
     return ref, reference, train
 
 
+def _hang_and_plan(args, params, paths, root: Path, candidates, arms, bar):
+    """(difficulty, arm index, hang, SKTs) on the first candidate arm where the reference
+    object hangs as ``contact_sim`` drops it and an SKT planned as ``rrt_skts`` plans reaches
+    that hang; or :class:`MeshError` naming what each arm gave."""
+    ref_row, reference, train = _reference(root)
+    seed, tried = params.common.seed, []
+    for diff, arm in candidates:
+        k = next(i for i, a in enumerate(arms) if a is arm)
+        hang = simulate_hangs(HangTask(
+            args.name, "reference_on_support", ref_row.object_id,
+            str(root / "mesh_gen" / ref_row.urdf_path), ref_row.aperture_clearance_m, args.name,
+            str(paths["urdf"]), tuple(map(tuple, arm.points)), tuple(diff.hang_point), arm.radius,
+            seed, params.contact_sim, eval_damping(params)))
+        if not hang["ok"]:
+            tried.append(f"arm {k}: the reference object does not hang on it "
+                         f"({hang['failure_reason']}; {hang['n_success']}/{hang['n_attempts']} "
+                         "drops hung)")
+            continue
+        bar.update()
+        planned = plan_support_skts(SktTask(
+            args.name, "user", str(paths["urdf"]), str(paths["mesh"]), reference, train, (),
+            tuple(hang["hang_position"]), tuple(hang["hang_quat"]), seed, params.clustering.T,
+            params.rrt_skts))
+        goal = (pose_matrix(hang["hang_position"], hang["hang_quat"])
+                @ np.asarray(reference.keypoint).reshape(4, 4))[:3, 3]
+        skts = [s for s in planned["skts"]
+                if np.linalg.norm(s["keypoints"][0] - goal) <= REACH_TOL_M]
+        if skts:
+            return diff, k, hang, planned, skts
+        tried.append(f"arm {k}: no SKT reaches the hang ({planned['n_attempted']} attempts; "
+                     f"failures {planned['failures'] or 'none'})")
+    raise MeshError(f"{args.mesh}: " + "; ".join(tried))
+
+
 def import_support(args, params, bar) -> dict:
     name, seed, root = args.name, params.common.seed, Path(args.data_root)
-    ref_row, reference, train = _reference(root)
     to_support = support_frame(args)
-    mesh = repair(read_mesh(args.mesh, args.units), str(args.mesh))
-    mesh = Mesh(transform_points(to_support, mesh.vertices), mesh.faces)
+    solid = load_solid(args.mesh, args.units)
+    mesh = Mesh(transform_points(to_support, solid.mesh.vertices), solid.mesh.faces)
     visual, plated = mount(mesh, str(args.mesh))
-    parts = decompose(visual, seed=seed)
+    parts, route = decompose(visual, seed=seed)
     bar.update()
-    diff, arm, arms = mesh_difficulty(visual, params.mesh_gen, args.arm)
+    candidates, arms = hang_candidates(visual, params.mesh_gen, args.arm)
     bar.update()
     with tempfile.TemporaryDirectory(prefix="skt-import-") as tmp:
         paths = write_shape(Path(tmp), name, visual, parts, 0.0, [0, 0, 0], [[0] * 3] * 3,
@@ -130,28 +166,8 @@ def import_support(args, params, bar) -> dict:
         check_solid(visual_back, f"{args.mesh} (written)")
         iou = check_parts(read_obj(paths["collision"]), visual_back, f"{args.mesh} (written)",
                           min_iou=0.0)
-        cs = params.contact_sim
-        hang = simulate_hangs(HangTask(
-            name, "reference_on_support", ref_row.object_id,
-            str(root / "mesh_gen" / ref_row.urdf_path),
-            ref_row.aperture_clearance_m, name, str(paths["urdf"]), tuple(map(tuple, arm.points)),
-            tuple(diff.hang_point), arm.radius, seed, cs, eval_damping(params)))
-        if not hang["ok"]:
-            raise MeshError(f"{args.mesh}: the reference object does not hang on it "
-                            f"({hang['failure_reason']}; {hang['n_success']}/{hang['n_attempts']} "
-                            "drops hung)")
-        bar.update()
-        planned = plan_support_skts(SktTask(
-            name, "user", str(paths["urdf"]), str(paths["mesh"]), reference, train, (),
-            tuple(hang["hang_position"]), tuple(hang["hang_quat"]), seed, params.clustering.T,
-            params.rrt_skts))
-        goal = (pose_matrix(hang["hang_position"], hang["hang_quat"])
-                @ np.asarray(reference.keypoint).reshape(4, 4))[:3, 3]
-        skts = [s for s in planned["skts"]
-                if np.linalg.norm(s["keypoints"][0] - goal) <= REACH_TOL_M]
-        if not skts:
-            raise MeshError(f"{args.mesh}: no SKT reaches the hang ({planned['n_attempted']} "
-                            f"attempts; failures {planned['failures'] or 'none'})")
+        diff, arm, hang, planned, skts = _hang_and_plan(args, params, paths, root, candidates,
+                                                        arms, bar)
         bar.update()
         render_support(RenderTask(name, str(paths["mesh"]), str(Path(tmp) / "views.npz"), seed,
                                   params.render_views))
@@ -161,8 +177,9 @@ def import_support(args, params, bar) -> dict:
             "difficulty": diff.level, "blocking_height_m": diff.blocking_height_m,
             "clearance_above_m": diff.clearance_above_m, "tip_turn_deg": diff.tip_turn_deg,
             "hang_point": list(diff.hang_point), "hang_tangent": list(diff.hang_tangent),
-            "arm_centreline": arm.points.tolist(), "radius_m": arm.radius, "n_arms": len(arms),
-            "n_parts": len(parts), "part_iou": iou,
+            "arm": arm, "arm_centreline": arms[arm].points.tolist(), "radius_m": arms[arm].radius,
+            "n_arms": len(arms),
+            **mesh_record(solid, parts, route, iou),
             "reference_hang_position": list(hang["hang_position"]),
             "reference_hang_quat": list(hang["hang_quat"]),
             "contact_support": list(hang["contact_support"]),
@@ -180,7 +197,8 @@ def import_support(args, params, bar) -> dict:
 
 def run(args) -> int:
     dest, record = run_import(args, "support", import_support)
-    print(f"{dest}: imported {args.name} ({record['difficulty']}, blocking height "
+    arm = f"arm {record['arm']} of {record['n_arms']}, " if record["n_arms"] > 1 else ""
+    print(f"{dest}: imported {args.name} ({arm}{record['difficulty']}, blocking height "
           f"{1000 * record['blocking_height_m']:.1f} mm, {record['n_parts']} convex parts, IoU "
           f"{record['part_iou']:.3f}, {len(record['skts'])}/{record['n_skts_attempted']} SKTs "
           f"reach the hang); hang an object on it with `skt hang --support {args.name}`")

@@ -211,20 +211,22 @@ def find_arms(mesh: Mesh, pitch: float = PITCH_M) -> list[Arm]:
     return arms
 
 
-def mesh_difficulty(mesh: Mesh, p: MeshGenParams, arm_index: int | None = None
-                    ) -> tuple[Difficulty, Arm, list[Arm]]:
-    """(difficulty, the hanging arm, every arm) of ``mesh`` by :func:`measure_difficulty`.
+def hang_candidates(mesh: Mesh, p: MeshGenParams, arm_index: int | None = None
+                    ) -> tuple[list[tuple[Difficulty, Arm]], list[Arm]]:
+    """The arms of ``mesh`` an object may hang on, each with its difficulty by
+    :func:`measure_difficulty`, in the order to try them; and every arm.
 
-    The hanging arm is ``arms[arm_index]`` or, by default, the arm whose hang point is lowest
-    (to the nearest 5 mm), then nearest the mount point sideways. The other arms stand for
-    the other strokes (clearance above the arm); stretches of the hanging arm beyond its hang
-    point whose radius exceeds the arm's by :data:`BULGE_M` count as knobs (blocking height)."""
+    ``arm_index`` given: ``arms[arm_index]`` alone. Otherwise every arm that has a hang
+    region, the arm whose hang point is lowest (to the nearest 5 mm) first, then the one
+    nearest the mount point sideways (a fork's prongs, a rack's pegs: the caller tries them
+    in turn). The other arms stand for the other strokes (clearance above the arm);
+    stretches of an arm beyond its hang point whose radius exceeds the arm's by
+    :data:`BULGE_M` count as knobs (blocking height)."""
     arms = find_arms(mesh)
-    shapes = [SupportShape("user", tuple(Stroke(a.points, a.radius, False) for a in
-                                         [arm, *[o for o in arms if o is not arm]]))
-              for arm in arms]
     measured = []
-    for arm, shape in zip(arms, shapes):
+    for arm in arms:
+        shape = SupportShape("user", tuple(Stroke(a.points, a.radius, False) for a in
+                                           [arm, *[o for o in arms if o is not arm]]))
         try:
             measured.append((arm, shape, measure_difficulty(shape, p)))
         except GenerationFailed as err:  # this arm cannot hang (no hang region, slides off)
@@ -240,11 +242,22 @@ def mesh_difficulty(mesh: Mesh, p: MeshGenParams, arm_index: int | None = None
     if not chosen or not isinstance(chosen[0][2], Difficulty):
         reasons = "; ".join(str(m[2]) for m in measured if not isinstance(m[2], Difficulty))
         raise MeshError(f"no arm to hang on: {reasons}")
-    arm, shape, diff = chosen[0]
+    return [(_with_knobs(arm, shape, diff, p), arm) for arm, shape, diff in chosen], arms
+
+
+def _with_knobs(arm: Arm, shape: SupportShape, diff: Difficulty, p: MeshGenParams
+                ) -> Difficulty:
     c = np.asarray(diff.hang_point)
     i = int(np.argmin(np.linalg.norm(arm.dense - c, axis=1)))
     bulges = tuple((tuple(q), float(r)) for q, r in zip(arm.dense[i + 1:], arm.dense_radii[i + 1:])
                    if r > arm.radius + BULGE_M)
-    if bulges:
-        diff = measure_difficulty(SupportShape("user", shape.strokes, bulges), p)
+    return measure_difficulty(SupportShape("user", shape.strokes, bulges), p) if bulges else diff
+
+
+def mesh_difficulty(mesh: Mesh, p: MeshGenParams, arm_index: int | None = None
+                    ) -> tuple[Difficulty, Arm, list[Arm]]:
+    """(difficulty, the first arm to hang on, every arm) of ``mesh``: the first of
+    :func:`hang_candidates`."""
+    candidates, arms = hang_candidates(mesh, p, arm_index)
+    diff, arm = candidates[0]
     return diff, arm, arms

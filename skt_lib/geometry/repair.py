@@ -1,23 +1,29 @@
-"""Meshes from outside (OBJ, STL, PLY, GLB…): read, check units, repair, decompose.
+"""Meshes from outside (OBJ, STL, PLY, GLB…): read, check units, repair, simplify.
 
-A user's mesh is repaired where that is safe — duplicate vertices merged, degenerate faces
-dropped, winding made consistent and outward, small open boundary loops capped, overlapping
-bodies united — and refused with the reason otherwise. Collision geometry comes from CoACD
-(approximate convex decomposition), written in the same compound-of-hulls format as
-``mesh_gen`` (:mod:`skt_lib.geometry.export`).
+A user's mesh is repaired where that is safe — duplicate vertices merged, faces that
+collapsed onto an edge or a point (a repeated vertex) dropped, winding made consistent and
+outward, small open boundary loops capped, overlapping bodies united — and refused with
+the reason otherwise. Faces of zero area whose three vertices are distinct are kept: in a
+dense export they are part of a closed surface (dropping them opened holes whose loops
+touch, and a watertight 280k-face hook was refused as non-manifold). Above a face budget
+the repaired mesh is simplified (:mod:`skt_lib.geometry.simplify`). Collision geometry
+comes from :mod:`skt_lib.geometry.decompose`.
 """
-
-import logging
 
 import numpy as np
 import trimesh
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from skt_lib.errors import MeshError
 from skt_lib.geometry.checks import DIAGONAL_RANGE_M, check_solid
-from skt_lib.geometry.convex import Mesh, hull, union
+from skt_lib.geometry.convex import Mesh, union
+from skt_lib.geometry.simplify import Simplified, simplify_to_budget
 
-log = logging.getLogger(__name__)
 UNITS = {"m": 1.0, "mm": 0.001}
+#: Vertices closer than this (m) are one vertex (:func:`weld`).
+WELD_M = 1e-7
 #: Open boundary loops up to this many edges are capped; longer ones are real holes.
 MAX_CAP_EDGES = 64
 
@@ -57,7 +63,8 @@ def _cap_loops(tm: trimesh.Trimesh, name: str) -> trimesh.Trimesh:
                                 open_edges.view([("", edges.dtype)] * 2)).ravel()]
     nxt = {int(a): int(b) for a, b in directed}
     if len(nxt) != len(directed):
-        raise MeshError(f"{name}: open boundary is not a set of simple loops (non-manifold)")
+        raise MeshError(f"{name}: not watertight — its open boundary passes through a vertex "
+                        "more than once (non-manifold), too tangled to cap safely")
     verts, faces = list(tm.vertices), list(tm.faces)
     seen = set()
     for start in list(nxt):
@@ -68,7 +75,8 @@ def _cap_loops(tm: trimesh.Trimesh, name: str) -> trimesh.Trimesh:
             seen.add(v)
             loop.append(v)
             if v not in nxt:
-                raise MeshError(f"{name}: open boundary does not close into loops")
+                raise MeshError(f"{name}: not watertight — its open boundary does not close "
+                                "into loops")
             v = nxt[v]
         if len(loop) > MAX_CAP_EDGES:
             raise MeshError(f"{name}: not watertight — a hole of {len(loop)} edges, too large "
@@ -80,12 +88,30 @@ def _cap_loops(tm: trimesh.Trimesh, name: str) -> trimesh.Trimesh:
     return trimesh.Trimesh(np.array(verts), np.array(faces), process=False)
 
 
+def weld(vertices: np.ndarray, faces: np.ndarray, tol: float = WELD_M
+         ) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices closer than ``tol`` made one (by distance, not by rounding: two copies of a
+    vertex a float32 rounding apart can fall either side of a rounding boundary), then faces
+    left with a repeated vertex dropped. Unreferenced vertices stay (harmless)."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    parent = np.arange(len(vertices))
+    pairs = cKDTree(vertices).query_pairs(tol, output_type="ndarray")
+    if len(pairs):
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                           shape=(len(vertices),) * 2)
+        _, parent = connected_components(graph, directed=False)
+    first = np.full(parent.max() + 1, len(vertices))
+    np.minimum.at(first, parent, np.arange(len(vertices)))
+    f = first[parent][np.asarray(faces, dtype=np.int64)]
+    keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])
+    return vertices, f[keep]
+
+
 def repair(mesh: Mesh, name: str) -> Mesh:
     """A closed, consistently wound, outward solid from ``mesh``, or :class:`MeshError`
     saying why not."""
-    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
-    tm.merge_vertices()
-    tm.update_faces(tm.nondegenerate_faces())
+    verts, faces = weld(mesh.vertices, mesh.faces)
+    tm = trimesh.Trimesh(verts, faces, process=False)
     tm.update_faces(tm.unique_faces())
     tm.remove_unreferenced_vertices()
     if not tm.is_watertight:
@@ -106,20 +132,7 @@ def repair(mesh: Mesh, name: str) -> Mesh:
     return out
 
 
-def decompose(mesh: Mesh, threshold: float = 0.05, seed: int = 0) -> list[Mesh]:
-    """Convex parts covering ``mesh`` (CoACD, concavity ``threshold``, seeded), as hulls."""
-    import coacd
-
-    coacd.set_log_level("error")
-    parts = coacd.run_coacd(coacd.Mesh(mesh.vertices, mesh.faces), threshold=threshold,
-                            seed=seed, max_ch_vertex=64, mcts_iterations=60, mcts_nodes=10,
-                            mcts_max_depth=2)  # a third of the default search: ~5 s a mug
-    hulls = []
-    for v, _ in parts:
-        try:
-            hulls.append(hull(np.asarray(v, dtype=np.float64)))
-        except ValueError:
-            continue  # a flat sliver (fewer than 4 points): no volume to collide with
-    if not hulls:
-        raise MeshError("convex decomposition gave no parts")
-    return hulls
+def load_solid(path, units: str = "m") -> Simplified:
+    """The mesh in ``path`` read (:func:`read_mesh`), repaired (:func:`repair`) and
+    simplified to the face budget (:func:`simplify_to_budget`)."""
+    return simplify_to_budget(repair(read_mesh(path, units), str(path)))
