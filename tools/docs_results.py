@@ -62,10 +62,14 @@ BENCH_ROWS = {
                                                      "reference executor's, same run"),
     "sim_verdict_agreement": ("{:.3f}", "share of those trials whose verdict (failure reason, "
                                         "or success) both executors agree on"),
+    "import_dense_s_median": ("{:.1f} s", "`skt import-support` / `import-object` of a ≥ 250k-"
+                                          "face mesh (the mesh zoo's dense cases, "
+                                          "`tools/mesh_zoo.py`), process start included"),
+    "import_dense_s": ("{}", "each of those imports (s)"),
 }
 BENCH_SAMPLE = ("machine", "rrt_bench_supports", "rrt_bench_skts", "rrt_bench_skts_reference",
                 "rrt_bench_skts_per_support", "sim_bench_trials",
-                "sim_verdict_disagreements")
+                "sim_verdict_disagreements", "import_dense_failed")
 
 PAPER_SKTS = 472 * 50  # the paper preset of docs/presets.md: supports × SKTs per support
 
@@ -172,6 +176,11 @@ def bench_table(bench: dict) -> str:
         differ = bench["sim_verdict_disagreements"]
         lines += ["", "Verdicts the executors disagree on: "
                   + ("; ".join(f"`{d}`" for d in differ) if differ else "none") + "."]
+    if "import_dense_failed" in bench:
+        failed = bench["import_dense_failed"]
+        lines += ["", "Dense imports refused: " + ("; ".join(f"`{k}`: {v}" for k, v in
+                                                         failed.items()) if failed else "none")
+                  + "."]
     return "\n".join(lines)
 
 
