@@ -11,9 +11,14 @@ import sys
 import traceback
 from collections.abc import Sequence
 
-from skt_lib.cli import hang, import_mesh, import_support, predict
-from skt_lib.cli.common import EXIT_BAD_INPUT
-from skt_lib.errors import SktError
+from skt_lib.quiet import import_quietly
+
+# before any command module imports it: PyBullet's banner goes to nowhere (stderr with --debug)
+import_quietly("pybullet", to_stderr="--debug" in sys.argv)
+
+from skt_lib.cli import hang, import_mesh, import_support, predict  # noqa: E402
+from skt_lib.cli.common import EXIT_BAD_INPUT  # noqa: E402
+from skt_lib.errors import SktError  # noqa: E402
 
 EPILOG = """examples:
   skt predict hook.ply -o skt.json --rrd skt.rrd
