@@ -193,7 +193,28 @@ def test_rollout_trace_columns_are_the_per_step_logs(tmp_path):
             rec.log(f"{name}/object", _pose(t))
             trail.append((t @ keypoint)[:3, 3])
             log_strip(rec, f"{name}/keypoint_trail", np.asarray(trail), rgb=(250, 250, 250))
-            rec.log("plots/keypoint_to_skt_mm", rr.Scalars(1000 * distance_to_path(trail[-1], skt)))
+            rec.log("plots/keypoint_to_skt_mm/02",
+                    rr.Scalars(1000 * distance_to_path(trail[-1], skt)))
     columns, steps = _rows(tmp_path / "columns.rrd"), _rows(tmp_path / "steps.rrd")
     assert sum(columns.values()) == 6 * 5
     assert columns == steps
+
+
+def test_each_trial_plots_its_own_distance_series(tmp_path):
+    """Two trials' distance plots are two series (entities), so the plot draws no line from
+    one trial's end to the next one's start."""
+    import numpy as np
+
+    from viz.rerun_log import recording
+    from viz.rollouts import _log_trace
+
+    frames = [{"step": i, "links": {}, "object": np.eye(4)} for i in range(3)]
+    with recording("test", tmp_path / "two.rrd", "t") as rec:
+        for n, step in ((0, 0), (1, 50)):
+            _log_trace(rec, f"world/trials/{n:02d}", n, step, frames, None, np.eye(4),
+                       np.array([[0.0, 0.0, 0.1 * (n + 1)], [0.1, 0.0, 0.1 * (n + 1)]]))
+    plots = {}
+    for (entity, times, _), count in _rows(tmp_path / "two.rrd").items():
+        if entity.startswith("/plots"):
+            plots.setdefault(entity, set()).update(t for name, t in times if name == "trial")
+    assert plots == {"/plots/keypoint_to_skt_mm/00": {0}, "/plots/keypoint_to_skt_mm/01": {1}}

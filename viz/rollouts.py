@@ -10,7 +10,9 @@ trial, to replay each rollout).
     world/trials/<n>/skt              the SKT executed (keypoint path, the method's colour)
     world/trials/<n>/skt/frames       its waypoint frames
     world/trials/<n>/keypoint_trail   where the object's keypoint actually went
-    plots/keypoint_to_skt_mm          the keypoint's distance from the SKT, every recorded step
+    plots/keypoint_to_skt_mm/<n>      trial n's keypoint distance from its SKT, every recorded
+                                      step: a series per trial (one series across trials drew
+                                      500 mm jumps from one trial's end to the next one's start)
     item/info                         trial, method, support, object, verdict
 """
 
@@ -92,7 +94,7 @@ def _log_trace(rec, name: str, n: int, step: int, frames: list, links, keypoint:
     rec.send_columns(f"{name}/keypoint_trail", index, rr.LineStrips3D.columns(
         strips=[trail[:i + 1] for i in range(len(trail))], colors=[_TRAIL_RGB] * len(trail),
         radii=[_TRAIL_RADIUS] * len(trail)))
-    rec.send_columns("plots/keypoint_to_skt_mm", index, rr.Scalars.columns(
+    rec.send_columns(f"plots/keypoint_to_skt_mm/{n:02d}", index, rr.Scalars.columns(
         scalars=[1000 * distance_to_path(p, skt) for p in trail]))
 
 
