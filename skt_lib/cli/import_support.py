@@ -12,8 +12,9 @@ CoACD, or V-HACD where CoACD fails) and a URDF as ``mesh_gen`` writes them, the 
 difficulty level from the mesh (:func:`skt_lib.geometry.centreline.hang_candidates`), the
 reference object's hang as ``contact_sim`` drops it and SKTs planned and re-checked as
 ``rrt_skts`` does — on the first arm where both succeed (a fork's or rack's prongs are
-tried in turn; ``--arm`` picks one) — and the 42 views of ``render_views``. The result lives in ``<data-root>/user/supports/<name>/`` and is
-written only once everything has passed.
+tried in turn; ``--arm`` picks one) — and the 42 views of ``render_views``. The result
+lives in ``<data-root>/user/supports/<name>/`` and is written only once everything has
+passed.
 """
 
 import tempfile
