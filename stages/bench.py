@@ -47,6 +47,7 @@ from skt_lib.planning import bench as planner_bench
 from skt_lib.schemas import SUPPORTS
 from skt_lib.sim.execute import run_trial
 from stages._common import run_items
+from tools.mesh_zoo import bench_dense_imports
 
 
 def rrt_bench(params, root: Path, per_level: int, n_skts: int) -> dict:
@@ -118,26 +119,6 @@ def sim_bench(params, root: Path, per_level: int) -> dict:
             "sim_verdict_disagreements": differ, "sim_bench_trials": len(ref)}
 
 
-def import_bench(params_path: Path, root: Path, tmp: Path) -> dict:
-    """``skt import-support`` / ``import-object`` of the mesh zoo's ≥ 250k-face cases, one at
-    a time, each a fresh process (its start included: what a user waits for)."""
-    from tools.mesh_zoo import cases, run_case
-
-    seconds, failed = {}, {}
-    for case in [c for c in cases() if c.dense and c.name.endswith("_250k")]:
-        case_root = tmp / "import" / case.name
-        case_root.mkdir(parents=True)
-        for stage in ("mesh_gen", "contact_sim", "rotation_extraction", "rrt_skts"):
-            (case_root / stage).symlink_to((root / stage).resolve(), target_is_directory=True)
-        out = run_case(case, tmp, case_root, params_path)
-        if out.returncode == 0:
-            seconds[case.name] = out.seconds
-        else:
-            failed[case.name] = (out.errors or ("exit code %d" % out.returncode,))[-1]
-    return {"import_dense_s_median": float(np.median(list(seconds.values()))) if seconds else None,
-            "import_dense_s": seconds, "import_dense_failed": failed}
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="stages.bench", description=__doc__.splitlines()[0])
     ap.add_argument("--params", default="params.yaml")
@@ -157,7 +138,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         bench |= render_bench(params, root, args.per_level, Path(tmp))
     with tempfile.TemporaryDirectory() as tmp:
-        bench |= import_bench(Path(args.params), root, Path(tmp))
+        bench |= bench_dense_imports(Path(args.params), root, Path(tmp))
     bench["machine"] = (f"{platform.machine()}, {os.cpu_count()} cores, "
                         f"{params.compute.n_workers} workers")
     write_json_atomic(Path(args.out), bench)

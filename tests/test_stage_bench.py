@@ -16,7 +16,7 @@ def test_bench_json_is_written_fresh(monkeypatch, tmp_path):
     monkeypatch.setattr(bench, "sim_bench", lambda *a: {"sim_trials_per_min": 3.0})
     monkeypatch.setattr(bench, "cli_bench", lambda *a: {"cli_predict_ms_median": 5.0})
     monkeypatch.setattr(bench, "render_bench", lambda *a: {"render_ms_per_view_median": 4.0})
-    monkeypatch.setattr(bench, "import_bench", lambda *a: {"import_dense_s_median": 6.0})
+    monkeypatch.setattr(bench, "bench_dense_imports", lambda *a: {"import_dense_s_median": 6.0})
     assert bench.main(["--out", str(out), "--data-root", str(tmp_path)]) == 0
     got = json.loads(out.read_text())
     assert set(got) == {"rrt_plan_s_median", "sctdn_inference_ms_median", "sim_trials_per_min",
