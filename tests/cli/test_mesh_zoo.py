@@ -137,8 +137,9 @@ def _cmdline(pid: int) -> str:
 
 
 def test_a_killed_import_leaves_nothing_half_written(tiny_dataset, tmp_path):
-    """SIGKILL while the convex decomposition runs: no import folder, no staging folder, no
-    child left computing; the same import then runs from scratch."""
+    """SIGKILL while the convex decomposition runs: no import folder, no staging folder.
+    (That the child dies with its parent is asserted where it can be forced: the cup hook's
+    decomposition may end on its own within the wait, tests/geometry/test_decompose.py.)"""
     _, data, _ = tiny_dataset
     root = linked_root(tmp_path, "root", data)
     case = next(c for c in cases() if c.name == "cup_hook")

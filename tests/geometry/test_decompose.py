@@ -2,6 +2,8 @@
 (:mod:`skt_lib.isolated`), an abort, a hang or an error there is the next route's turn,
 and only when every route fails is the mesh refused, naming each."""
 
+import os
+import signal
 import time
 
 import numpy as np
@@ -79,3 +81,45 @@ def test_coacd_without_its_remesher_keeps_a_union_of_bodies_tight():
     parts, route = decompose(mesh)
     assert route == "coacd"
     assert check_parts(parts, mesh, "two bodies", min_iou=0.95) >= 0.95
+
+
+def test_a_killed_caller_takes_its_child_with_it(tmp_path):
+    """The child dies with its parent (PR_SET_PDEATHSIG): a killed import leaves nothing
+    computing on."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import numpy as np\n"
+        "from skt_lib.isolated import call_isolated\n"
+        f"call_isolated('{FAULTS}:hang', {{'vertices': np.zeros((1, 3))}}, time_limit_s=600)\n")
+    parent = subprocess.Popen([sys.executable, str(script)], cwd=os.getcwd())
+    child = None
+    for _ in range(200):
+        child = _children(parent.pid)
+        if child:
+            break
+        time.sleep(0.05)
+    assert child, "the child never started"
+    os.kill(parent.pid, signal.SIGKILL)
+    parent.wait()
+    for _ in range(100):
+        if not os.path.exists(f"/proc/{child[0]}") or _state(child[0]) == "Z":
+            break
+        time.sleep(0.05)
+    else:
+        pytest.fail(f"child {child[0]} outlived its killed parent")
+
+
+def _children(pid: int) -> list[int]:
+    with open(f"/proc/{pid}/task/{pid}/children") as f:
+        return [int(c) for c in f.read().split()]
+
+
+def _state(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return "gone"
