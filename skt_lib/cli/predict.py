@@ -1,6 +1,7 @@
 """``skt predict CLOUD``: the SKT of a user's partial cloud of a supporting item.
 
-The cloud is scaled to metres (``--units``), moved into the support frame (``--frame``),
+The cloud is scaled to metres (``--units``), moved into the support frame (``--frame``, or
+``--camera``: the frame found from the wall in view, :mod:`skt_lib.perception.wall_frame`),
 cleaned (:func:`skt_lib.perception.pointcloud.clean_cloud`), brought to the model's N points
 by the same farthest-point sampling and shuffle as every training view
 (:func:`skt_lib.perception.pointcloud.sample_to`) and predicted; the SKT is written as JSON
@@ -17,18 +18,22 @@ import numpy as np
 from skt_lib.cli.cloud_checks import check_support_cloud
 from skt_lib.cli.common import UNITS, load_predictor, progress, read_cloud, read_frame
 from skt_lib.errors import InputError
-from skt_lib.geometry.se3 import matrix_to_quat, transform_points
+from skt_lib.geometry.se3 import invert, matrix_to_quat, transform_points
 from skt_lib.io import write_json_atomic
 from skt_lib.learning.predictor import Skt, SktPredictor
 from skt_lib.perception.pointcloud import clean_cloud, median_radius, sample_to
+from skt_lib.perception.wall_frame import support_frame
 
 SCHEMA, SCHEMA_VERSION = "skt", 2
 #: A cloud said to be in millimetres whose median radius is below this (m) was in metres.
 MIN_MEDIAN_RADIUS_M = 0.002
+#: ... and, with --camera, whose median range from the camera is below this (m).
+MIN_MEDIAN_RANGE_M = 0.02
 
 EXAMPLE = """example:
   skt predict hook.ply --model data/train -o skt.json --rrd skt.rrd
-  skt predict scan.npy --units mm --frame cam_to_support.json"""
+  skt predict scan.npy --units mm --frame cam_to_support.json
+  skt predict raw_depth.ply --camera --up 0 -1 0     # camera frame, wall in view"""
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,6 +42,7 @@ class Prediction:
     points: np.ndarray  # (N, 3) the cloud the model saw, support frame, metres
     counts: dict  # cleaning: points in and removed per step
     warnings: tuple[str, ...] = ()  # the cloud does not look like a training view (cloud_checks)
+    camera_to_support: np.ndarray | None = None  # (4, 4) the frame --camera found
 
 
 def prepare_cloud(points: np.ndarray, n: int, units: str = "m", frame: np.ndarray | None = None,
@@ -70,16 +76,38 @@ def predict_cloud(predictor: SktPredictor, points: np.ndarray, units: str = "m",
     return Prediction(predictor.predict(cloud), cloud, counts, tuple(warnings))
 
 
+def predict_camera(predictor: SktPredictor, points: np.ndarray, up: np.ndarray | None,
+                   units: str = "m", seed: int = 0, name: str = "points") -> Prediction:
+    """A raw camera-frame cloud with the wall in view: the support frame found from it
+    (:func:`~skt_lib.perception.wall_frame.support_frame`; ``up`` in the camera frame, or
+    ``None`` for a level camera), the wall removed, then as :func:`predict_cloud`."""
+    a = np.asarray(points, dtype=np.float64) * UNITS[units]
+    finite = a[np.isfinite(a).all(axis=1)]
+    if units == "mm" and len(finite):
+        range_m = float(np.median(np.linalg.norm(finite, axis=1)))
+        if range_m < MIN_MEDIAN_RANGE_M:
+            raise InputError(f"{name}: median range {range_m * 1000:.3g} mm after conversion from "
+                             "millimetres — was it in metres already? (drop --units mm)")
+    wf = support_frame(a, up, name=name)
+    pred = predict_cloud(predictor, wf.points, "m", None, seed, name)
+    return Prediction(pred.skt, pred.points, {**pred.counts, "n_wall": wf.n_wall}, pred.warnings,
+                      wf.camera_to_support)
+
+
+def _waypoints(frames: np.ndarray) -> list[dict]:
+    return [{"position": f[:3, 3].tolist(), "quat": matrix_to_quat(f[:3, :3]).tolist()}
+            for f in frames]
+
+
 def skt_record(pred: Prediction, source: str, model: str) -> dict:
-    """The JSON document of README "Command line" (schema ``skt`` v1)."""
+    """The JSON document of docs/cli.md (schema ``skt`` v2; ``camera`` only with --camera)."""
     skt = pred.skt
-    return {
+    record = {
         "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
         "frame": "support", "units": "m", "quaternion_order": "xyzw",
         "source": source, "model": model,
         "T": len(skt.positions),
-        "waypoints": [{"position": f[:3, 3].tolist(), "quat": matrix_to_quat(f[:3, :3]).tolist()}
-                      for f in skt.frames],
+        "waypoints": _waypoints(skt.frames),
         "family": skt.family,
         "contact_point": np.asarray(skt.contact).tolist(),
         "points": pred.points.tolist(),
@@ -91,6 +119,14 @@ def skt_record(pred: Prediction, source: str, model: str) -> dict:
         },
         "warnings": list(pred.warnings),
     }
+    if pred.camera_to_support is not None:  # the SKT again in the camera frame
+        to_cam = invert(pred.camera_to_support)
+        record["camera"] = {
+            "camera_to_support": pred.camera_to_support.tolist(),
+            "waypoints": _waypoints(to_cam @ skt.frames),
+            "contact_point": transform_points(to_cam, np.asarray(skt.contact)[None])[0].tolist(),
+        }
+    return record
 
 
 def median_predict_ms(model_dir: str | Path, cloud: np.ndarray, n: int = 30, warmup: int = 3
@@ -115,6 +151,13 @@ def add_parser(sub) -> None:
     ap.add_argument("--model", default="data/train", help="trained model folder (default: data/train)")
     ap.add_argument("--frame", help="JSON 4×4 camera-to-support transform (metres); "
                                     "without it the cloud is taken to be in the support frame")
+    ap.add_argument("--camera", action="store_true",
+                    help="the cloud is a raw camera-frame cloud with the wall in view: find the "
+                         "support frame from the wall (needs --up or --level)")
+    ap.add_argument("--up", type=float, nargs=3, metavar=("X", "Y", "Z"),
+                    help="with --camera: the up direction (against gravity) in the camera frame")
+    ap.add_argument("--level", action="store_true",
+                    help="with --camera: the camera is held level (image rows horizontal)")
     ap.add_argument("--units", choices=sorted(UNITS), default="m", help="units of the cloud")
     ap.add_argument("-o", "--output", default="skt.json", help="SKT JSON to write (default: skt.json)")
     ap.add_argument("--rrd", help="also write a Rerun recording: cloud, affordance, template, SKT")
@@ -122,14 +165,28 @@ def add_parser(sub) -> None:
     ap.set_defaults(run=run)
 
 
+def _camera_args(args) -> None:
+    if args.camera and args.frame:
+        raise InputError("--camera finds the frame from the wall: drop --frame")
+    if args.camera and (args.up is None) == (not args.level):
+        raise InputError("--camera needs exactly one of --up X Y Z (camera frame) or --level")
+    if not args.camera and (args.up is not None or args.level):
+        raise InputError("--up and --level go with --camera")
+
+
 def run(args) -> int:
+    _camera_args(args)
     with progress(4, "predict") as bar:
         points = read_cloud(args.cloud)
         frame = read_frame(args.frame) if args.frame else None
         bar.update()
         predictor = load_predictor(args.model)
         bar.update()
-        pred = predict_cloud(predictor, points, args.units, frame, args.seed, args.cloud)
+        if args.camera:
+            up = None if args.level else np.asarray(args.up, float)
+            pred = predict_camera(predictor, points, up, args.units, args.seed, args.cloud)
+        else:
+            pred = predict_cloud(predictor, points, args.units, frame, args.seed, args.cloud)
         template = predictor.predict(pred.points, deform=False)
         bar.update()
         record = skt_record(pred, str(args.cloud), str(args.model))
@@ -147,4 +204,8 @@ def run(args) -> int:
           f"{pred.counts['non_finite']} non-finite, {pred.counts['outliers']} outliers, "
           f"{pred.counts['off_cluster']} off the structure); family probability "
           f"{pred.skt.family_probability:.2f}, affordance peak {np.max(pred.skt.affordance):.2f}")
+    if pred.camera_to_support is not None:
+        origin = invert(pred.camera_to_support)[:3, 3].round(4).tolist()
+        print(f"support frame from the wall: origin {origin} m in the camera frame "
+              f"({pred.counts['n_wall']} wall points removed)")
     return 0
