@@ -193,6 +193,7 @@ class RenderViewsParams(_Section):
     height: int = Field(ge=16, le=4096, description="Image height, pixels.")
     n_points: int = Field(ge=16, le=100000, description="Points per view after farthest-point sampling.")
     noise_std_m: float = Field(ge=0.0, le=0.01, description="Depth noise along the ray; 0 = off.")
+    sensor_severity: float = Field(0.0, ge=0.0, le=4.0, description="Depth-camera views (skt_lib/perception/camera_views.py): the wall in view, the sensor model of skt_lib/perception/sensor.py at this severity (1 = a structured-light / stereo camera's defaults), the support frame found from the wall as `skt predict --camera` finds it; 0 = a perfect ray cast of the support alone.")
 
     @model_validator(mode="after")
     def _ranges(self) -> "RenderViewsParams":

@@ -6,6 +6,7 @@ Outputs: data/render_views/<support_id>.npz (points (V, N, 3) float32 support fr
          render_views.rrd; reports/render_views/{metrics.json, report.md, views.png}.
 """
 
+import functools
 import logging
 import sys
 import time
@@ -18,6 +19,7 @@ from skt_lib.errors import DataError
 from skt_lib.geometry.build import SUPPORT_RGBA
 from skt_lib.geometry.export import read_obj
 from skt_lib.io import read_npz, read_table, remove_partial_writes
+from skt_lib.perception.camera_views import camera_viewer
 from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
 from skt_lib.schemas import SUPPORTS
 from stages._common import parse_args, run_items
@@ -41,7 +43,9 @@ def main(argv=None) -> int:
     tasks = [RenderTask(s.support_id, str(src / s.mesh_path), str(out / f"{s.support_id}.npz"), seed, p)
              for s in supports.itertuples()]
     t0 = time.perf_counter()
-    results, failures, failed = run_items(render_support, tasks, params.compute, "supports")
+    render = (functools.partial(render_support, viewer=camera_viewer) if p.sensor_severity > 0
+              else render_support)
+    results, failures, failed = run_items(render, tasks, params.compute, "supports")
     remove_partial_writes(out)  # left by a worker killed mid-write (its task reran)
     wall = time.perf_counter() - t0
     for task, f in failed:
@@ -62,7 +66,10 @@ def main(argv=None) -> int:
         "points_per_view": p.n_points,
         "on_surface_rate": float(np.mean([r["on_surface_rate"] for r in results])),
         "noise_std_m": p.noise_std_m,
-        "n_views_rerendered": sum(r["n_rerendered"] for r in results),
+        "sensor_severity": p.sensor_severity,
+        # a depth camera's views are never rendered again; their flag: the frame fell back
+        ("n_views_frame_fallback" if p.sensor_severity > 0 else "n_views_rerendered"):
+            sum(r["n_rerendered"] for r in results),
         "n_views_padded": sum(r["n_padded"] for r in results),
     }
     write_metrics(rep, metrics)
@@ -93,8 +100,13 @@ def main(argv=None) -> int:
     report.text(f"{len(results)} of {len(tasks)} supports rendered (failed: "
                 f"{metrics['failures_by_reason'] or 'none'}) × {n_views} views × {p.n_points} "
                 f"points ({p.width}×{p.height}; wall-clock times: the git-ignored run log "
-                "`logs/render_views.json`). Views re-rendered at 2× resolution: "
-                f"{metrics['n_views_rerendered']}; padded with duplicates: {metrics['n_views_padded']}. "
+                "`logs/render_views.json`). " + (
+                    f"Depth-camera views (sensor severity {p.sensor_severity:g}, the wall in "
+                    "view, the frame found from it); views whose frame fell back to the true "
+                    f"camera pose: {metrics['n_views_frame_fallback']}"
+                    if p.sensor_severity > 0 else
+                    f"Views re-rendered at 2× resolution: {metrics['n_views_rerendered']}") +
+                f"; padded with duplicates: {metrics['n_views_padded']}. "
                 f"On-surface rate (≤ 1 mm from the mesh): {metrics['on_surface_rate']:.4f}.")
     report.text("Camera layout: azimuth " + f"{p.azimuth_deg} × elevation {p.elevation_deg} degrees, "
                 f"{p.distance_m} m from the support's bounding-box centre, looking at it, +z up.")

@@ -6,7 +6,9 @@ still short, its points are padded with duplicates drawn by the view's generator
 input order), so point order carries no information.
 """
 
+import functools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,18 +54,23 @@ def render_view(renderer: DepthRenderer, cam, p: RenderViewsParams, rng: np.rand
     return sample_to(pts, p.n_points, rng), min(len(pts), p.n_points), seconds, rerendered
 
 
-def render_support(task: RenderTask) -> dict:
+def render_support(task: RenderTask, viewer: Callable | None = None) -> dict:
+    """Render and write one support's views. ``viewer(mesh, params)`` makes the view function
+    ``(camera, rng, name) -> (points, distinct points, seconds, flag)``; by default a perfect
+    ray cast of the support alone (:func:`render_view`; the flag: rendered again at twice the
+    resolution)."""
     p = task.params
     (mesh,) = read_obj(task.mesh_path)
     renderer = DepthRenderer(mesh, p.fov_deg)
+    view = viewer(mesh, p) if viewer else functools.partial(render_view, renderer, p=p)
     cams = support_cameras(mesh, p)
     points = np.zeros((len(cams), p.n_points, 3), np.float32)
     n_visible = np.zeros(len(cams), np.int32)
     render_s, n_rerendered = [], 0
     for v, cam in enumerate(cams):
         rng = item_rng(task.seed, "render_views", f"{task.support_id}/{v}")
-        points[v], n_visible[v], seconds, again = render_view(renderer, cam, p, rng,
-                                                              f"{task.support_id} view {v}")
+        points[v], n_visible[v], seconds, again = view(cam, rng=rng,
+                                                       name=f"{task.support_id} view {v}")
         render_s.append(seconds)
         n_rerendered += again
     write_npz_atomic(task.out_path, {
