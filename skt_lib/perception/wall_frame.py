@@ -1,8 +1,8 @@
 """The support frame from a raw depth-camera cloud: the wall plane, gravity, and where the
 hook meets the wall (``skt predict --camera``).
 
-1. **The wall** is the largest plane of the cloud (RANSAC, Open3D's ``segment_plane``,
-   seeded), refit by least squares to its inliers; its normal, turned toward the camera,
+1. **The wall** is the largest plane of the cloud (RANSAC, seeded and single-threaded so
+   that it repeats), refit by least squares to its inliers; its normal, turned toward the camera,
    is the support frame's +x.
 2. **Up** is the user's: ``up`` in the camera frame (an IMU's gravity, reversed), or, for a
    camera held level (image rows horizontal), the wall's vertical seen from it. Its part in
@@ -41,6 +41,7 @@ class WallSettings:
     voxel_m: float = 0.002  # clouds are voxel-downsampled to this first
     plane_tol_m: float = 0.004  # RANSAC inlier distance
     ransac_iterations: int = 1000
+    ransac_points: int = 4000  # inliers are counted on a seeded sample of this many points
     min_wall_share: float = 0.2  # the wall plane must hold this share of the points
     min_up_angle_deg: float = 30.0  # up must be this far from the wall normal
     min_level_angle_deg: float = 10.0  # --level: the camera's x this far from the normal
@@ -65,16 +66,31 @@ class WallFrame:
     n_in: int  # points after downsampling
 
 
+def _ransac(points: np.ndarray, s: WallSettings) -> np.ndarray:
+    """Inlier mask of the plane through three points that most points lie within
+    ``plane_tol_m`` of (counted on ``ransac_points`` of them), over ``ransac_iterations``
+    seeded draws (the first best on ties).
+    Open3D's ``segment_plane`` runs its draws on several threads and is not repeatable."""
+    rng = np.random.default_rng(s.seed)
+    tri = points[rng.integers(0, len(points), size=(s.ransac_iterations, 3))]
+    sample = points[rng.choice(len(points), min(len(points), s.ransac_points), replace=False)]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(n, axis=1)
+    ok = norm > 1e-12
+    n[ok] /= norm[ok, None]
+    d = -(n * tri[:, 0]).sum(1)
+    counts = np.zeros(len(n), int)
+    for i in range(0, len(n), 64):  # (64, N) distances at a time
+        dist = np.abs(n[i:i + 64] @ sample.T + d[i:i + 64, None])
+        counts[i:i + 64] = (dist <= s.plane_tol_m).sum(1)
+    best = int(np.argmax(np.where(ok, counts, -1)))
+    return np.abs(points @ n[best] + d[best]) <= s.plane_tol_m
+
+
 def _plane(points: np.ndarray, s: WallSettings) -> tuple[np.ndarray, float, np.ndarray]:
     """(unit normal, offset, inlier mask) of the largest plane, n·p + d = 0, refit."""
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    o3d.utility.random.seed(s.seed)
-    model, inliers = pcd.segment_plane(s.plane_tol_m, 3, s.ransac_iterations)
-    n = np.asarray(model[:3], float)
-    d = float(model[3]) / np.linalg.norm(n)
-    n /= np.linalg.norm(n)
-    mask = np.zeros(len(points), bool)
-    mask[np.asarray(inliers, int)] = True
+    mask = _ransac(points, s)
+    n, d = np.array([0.0, 0.0, 1.0]), 0.0
     for _ in range(2):  # least-squares refit to the inliers, then the inliers again
         if mask.sum() < 3:
             break

@@ -32,6 +32,17 @@ def _bare_wall():
     return np.c_[rng.normal(0, 0.001, 3000), rng.uniform(-0.15, 0.15, (3000, 2))]
 
 
+def _camera_wall():
+    """A depth camera's cloud of a bare wall 40 cm in front of it (camera frame, 1 mm noise)."""
+    rng = np.random.default_rng(5)
+    return np.c_[rng.uniform(-0.15, 0.15, (20000, 2)), 0.4 + rng.normal(0, 0.001, 20000)]
+
+
+def _ball():
+    """No plane anywhere: 5000 points in a 5 cm Gaussian ball 40 cm in front of a camera."""
+    return np.random.default_rng(6).normal(0, 0.05, (5000, 3)) + [0.0, 0.0, 0.4]
+
+
 def _corrupt_model(t, d):
     m = t / "model"
     m.mkdir()
@@ -69,6 +80,25 @@ ROWS = {
         "x.npz: expected an (N, 3) array of x, y, z, got shape (2, 1000, 3)"),
     "a cloud of a bare wall, no hook": lambda t, d, v, p: (
         _predict(_npy(t / "wall.npy", _bare_wall()), d), "wall.npy: no structure stands off the wall"),
+    "--camera, a cloud with no plane": lambda t, d, v, p: (
+        _predict(_npy(t / "ball.npy", _ball()), d, "--camera", "--level"),
+        "ball.npy: no wall plane"),
+    "--camera, a bare wall": lambda t, d, v, p: (
+        _predict(_npy(t / "wall.npy", _camera_wall()), d, "--camera", "--level"),
+        "wall.npy: no structure stands off the wall plane"),
+    "--camera --up along the wall's normal": lambda t, d, v, p: (
+        _predict(_npy(t / "wall.npy", _camera_wall()), d, "--camera", "--up", "0", "0", "-1"),
+        "from the wall's normal"),
+    "--camera, a cloud in millimetres": lambda t, d, v, p: (
+        _predict(_npy(t / "wall.npy", 1000 * _camera_wall()), d, "--camera", "--level"),
+        "wall.npy: median range 418 m from the camera — a cloud in millimetres?"),
+    "--camera without --up or --level": lambda t, d, v, p: (
+        _predict(_npy(t / "wall.npy", _camera_wall()), d, "--camera"),
+        "--camera needs exactly one of --up X Y Z (camera frame) or --level"),
+    "--camera with --frame": lambda t, d, v, p: (
+        _predict(_npy(t / "wall.npy", _camera_wall()), d, "--camera", "--level", "--frame",
+                 _json(t / "f.json", np.eye(4).tolist())),
+        "--camera finds the frame from the wall: drop --frame"),
     "frame not rigid": lambda t, d, v, p: (
         _predict(_npy(t / "x.npy", v), d, "--frame", _json(t / "f.json", (2 * np.eye(4)).tolist())),
         "f.json: not a rigid transform"),

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from skt_lib.cli.predict import prepare_cloud
-from skt_lib.geometry.se3 import quat_to_matrix
+from skt_lib.geometry.se3 import pose_matrix, quat_to_matrix
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.geometry.skt import skt_frames
-from tests.cli.conftest import run_skt, save_ply
+from tests.cli.conftest import EASY_SUPPORT, run_skt, save_ply
 
 
 def _predict(capsys, data_root, cloud, out, *extra):
@@ -136,3 +136,55 @@ def test_training_views_pass_the_cloud_checks(tiny_dataset):
     views = [v for f in sorted((data / "render_views").glob("*.npz"))
              for v in read_npz(f, RENDER_SPEC)["points"]]
     assert len(views) >= 42 and all(check_support_cloud(v) == [] for v in views)
+
+
+def _camera_cloud(data_root, view: int = 10):
+    """A depth camera's raw cloud (camera frame, the wall in view, the sensor model at its
+    default severity) of the easy test support, with the true camera-to-support pose."""
+    from skt_lib.config import load_params
+    from skt_lib.geometry.export import read_obj
+    from skt_lib.io import read_table
+    from skt_lib.perception.sensor import CameraScene, Intrinsics, SensorModel, camera_view
+    from skt_lib.perception.views import support_cameras
+    from skt_lib.schemas import SUPPORTS
+
+    p = load_params("params.yaml").render_views
+    rows = read_table(data_root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")
+    (mesh,) = read_obj(data_root / "mesh_gen" / rows.loc[EASY_SUPPORT, "mesh_path"])
+    pose = support_cameras(mesh, p)[view].pose()
+    seen = camera_view(CameraScene(mesh), pose, Intrinsics(p.width, p.height, p.fov_deg),
+                       SensorModel(), np.random.default_rng(0))
+    return seen.points, pose
+
+
+def test_camera_mode_finds_the_frame_and_writes_the_skt_in_both_frames(capsys, data_root,
+                                                                        tmp_path):
+    from skt_lib.geometry.se3 import invert
+    from scipy.spatial.transform import Rotation
+
+    points, pose = _camera_cloud(data_root)
+    np.save(tmp_path / "raw.npy", points)
+    up = pose[:3, :3].T @ [0.0, 0.0, 1.0]  # against gravity, in the camera frame
+    got = _predict(capsys, data_root, tmp_path / "raw.npy", tmp_path / "up.json", "--camera",
+                   "--up", *map(str, up))
+    level = _predict(capsys, data_root, tmp_path / "raw.npy", tmp_path / "level.json",
+                     "--camera", "--level")
+    for doc in (got, level):
+        est = np.array(doc["camera"]["camera_to_support"])
+        err = est @ invert(pose)
+        assert np.linalg.norm(err[:3, 3]) <= 0.005
+        assert np.degrees(Rotation.from_matrix(err[:3, :3]).magnitude()) <= 2.0
+        # the camera-frame SKT is the support-frame one through the estimated transform
+        to_cam = invert(est)
+        for w, c in zip(doc["waypoints"], doc["camera"]["waypoints"]):
+            frame = to_cam @ pose_matrix(w["position"], w["quat"])
+            np.testing.assert_allclose(c["position"], frame[:3, 3], atol=1e-9)
+            np.testing.assert_allclose(quat_to_matrix(c["quat"]), frame[:3, :3], atol=1e-9)
+        np.testing.assert_allclose(doc["camera"]["contact_point"],
+                                   to_cam[:3, :3] @ doc["contact_point"] + to_cam[:3, 3], atol=1e-9)
+        assert doc["cleaning"]["n_wall"] > 10 * len(doc["points"])  # the wall was removed
+        assert doc["warnings"] == []  # what the model saw looks like a training view
+    # without --camera the same file is taken to be in the support frame: no camera block
+    np.save(tmp_path / "plain.npy", points)
+    assert "camera" not in _predict(capsys, data_root, tmp_path / "plain.npy",
+                                    tmp_path / "plain.json")
