@@ -112,4 +112,3 @@ def test_an_arm_seen_end_on_keeps_its_tip():
     wf = support_frame(view.points, pose[:3, :3].T @ UP)
     far = wf.points[wf.points[:, 0] > 0.095]  # (voxel-downsampled: fewer points than seen)
     assert len(far) > 30 and far[:, 2].max() > 0.035  # the whole riser, up to its top
-
