@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 UV_VERSION := $(shell sed -n 's/^uv==//p' requirements.lock)
 
-.PHONY: env lock repro test bench review seeds val-sim mutation train-diagnostics clean-env
+.PHONY: env lock repro test bench review seeds val-sim camera mutation train-diagnostics clean-env
 
 env: $(STAMP)
 
@@ -101,6 +101,13 @@ val-sim: $(STAMP)
 	@# needs the artifacts of `make repro`. Other methods or models: ARGS='--methods sctdn
 	@# template_only --model sctdn=DIR'
 	$(BIN)/python -m tools.val_sim $(ARGS)
+
+camera: $(STAMP)
+	@# skt predict --camera on depth-camera views of the test supports (the wall in view, the
+	@# sensor model at its default severity): support-frame errors against the true camera
+	@# pose, and SCTDN's SKT hung in simulation from the estimated and the true frame, into
+	@# reports/camera/; needs the artifacts of `make repro` (about 5 min on 2 cores)
+	$(BIN)/python -m tools.camera_eval
 
 train-diagnostics: $(STAMP)
 	@# short seeded SCTDN runs (overfit one batch, learning curve, contact term, train vs
