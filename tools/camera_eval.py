@@ -167,7 +167,8 @@ def _frame_summary(views) -> dict:
         fin = err[np.isfinite(err).all(1)]
         out[mode] = {
             "n_views": len(err), "n_refused": int(len(err) - len(fin)),
-            "within_tol_rate": float(((err[:, 0] <= FRAME_TOL_MM) & (err[:, 1] <= FRAME_TOL_DEG)).mean()),
+            "within_tol_rate": float(((err[:, 0] <= FRAME_TOL_MM)
+                                      & (err[:, 1] <= FRAME_TOL_DEG)).mean()),
             "translation_mm_median": float(np.median(fin[:, 0])),
             "translation_mm_p95": float(np.percentile(fin[:, 0], 95)),
             "translation_mm_max": float(fin[:, 0].max()),
@@ -196,7 +197,8 @@ def _paired(a: pd.DataFrame, b: pd.DataFrame, rng) -> dict:
     diff = x.astype(float) - y.astype(float)
     return {"difference": float(diff.mean()), "n_a_only": c.n_a_only, "n_b_only": c.n_b_only,
             "p_value": c.p_value,
-            "support_bootstrap_ci95": bootstrap_mean_interval(diff, b["support_id"].to_numpy(), rng)}
+            "support_bootstrap_ci95": bootstrap_mean_interval(diff, b["support_id"].to_numpy(),
+                                                              rng)}
 
 
 def summarize(views, trials: pd.DataFrame, args, seed: int) -> dict:
@@ -233,7 +235,8 @@ def write_report(rep: Path, m: dict, views) -> None:
 
     report = Report("camera", rep)
     report.text(f"`skt predict --camera` on {m['n_views']} depth-camera views ({m['n_supports']} "
-                f"{'validation' if m['split'] == 'val' else 'test'} supports × {m['views_per_support']} cameras of `render_views`' ring, the "
+                f"{'validation' if m['split'] == 'val' else 'test'} supports × "
+                f"{m['views_per_support']} cameras of `render_views`' ring, the "
                 "wall in view, the sensor model of `skt_lib/perception/sensor.py`), "
                 f"{m['method']}'s SKT executed by `sim_eval`'s executor (Panda, grasps, physics, "
                 "success predicate) on one " + ("training" if m["split"] == "val" else "test") +

@@ -15,8 +15,9 @@ camera-to-support transform a user would assume. The effects, in the order they 
    stereo matching cannot lock onto a part narrower than its window.
 3. **Flying pixels**: a share ``flying_rate`` of the pixels at a depth edge take a depth
    between their own and their neighbour's across the edge (mixed returns).
-4. **Depth noise growing with range**: σ(z) = ``sigma_a_m`` + ``sigma_b_per_m`` · z², along
-   the ray. The z² term is the stereo depth error, RMS = z² · subpixel / (focal_px ·
+4. **Depth noise growing with range**: σ(z) = ``sigma_a_m`` + ``sigma_b_per_m`` · z² on the
+   depth z (the point moves along its ray, up to 6 % farther at the image corners). The z²
+   term is the stereo depth error, RMS = z² · subpixel / (focal_px ·
    baseline) (Intel RealSense D400 tuning guide: subpixel 0.08, focal 640 px, baseline 50 mm
    give 0.0025 m⁻¹); the constant is a calibration floor. At 0.35–0.5 m: 0.8–1.1 mm,
    the range Nguyen, Izadi & Lovell (3DIMPVT 2012) measured for the Kinect's axial noise.
@@ -25,8 +26,8 @@ camera-to-support transform a user would assume. The effects, in the order they 
    the true one moved by ``pose_t_m`` along a random direction and turned by ``pose_r_deg``
    about a random axis.
 
-:meth:`SensorModel.at` scales every effect with a severity: 0 is a perfect sensor, 1 the
-defaults above, 2–4 a worse camera or setup.
+:meth:`SensorModel.at` scales every effect but the quantization with a severity: 0 is a
+perfect sensor, 1 the defaults above, 2–4 a worse camera or setup.
 """
 
 from dataclasses import dataclass, replace
@@ -55,16 +56,19 @@ class SensorModel:
     pose_r_deg: float = 2.0
 
     def at(self, severity: float) -> "SensorModel":
-        """This model with every effect scaled by ``severity`` (0 = a perfect sensor)."""
+        """This model with every effect but the quantization scaled by ``severity`` (0 = a
+        perfect sensor, quantization off too)."""
         if severity < 0:
             raise ValueError(f"severity: must be >= 0, got {severity}")
         if severity == 0:
             return SensorModel(0.0, 0.0, 0.0, (90.0, 90.0), 1, self.edge_jump_m, 0.0, 0.0, 0.0)
         lo, hi = self.grazing_deg
-        shift = (severity - 1) * 5.0  # each step past 1 loses returns 5° sooner
+        shift = (severity - 1) * 5.0  # each step past 1 loses returns 5° sooner (not below 0°)
         return replace(
             self, sigma_a_m=self.sigma_a_m * severity, sigma_b_per_m=self.sigma_b_per_m * severity,
-            quant_m=self.quant_m, grazing_deg=(min(lo - shift, 90.0), min(hi - shift, 90.0)),
+            quant_m=self.quant_m,
+            grazing_deg=(float(np.clip(lo - shift, 0.0, 90.0)),
+                         float(np.clip(hi - shift, 0.0, 90.0))),
             min_run_px=max(1, round(self.min_run_px * severity)),
             flying_rate=min(1.0, self.flying_rate * severity), pose_t_m=self.pose_t_m * severity,
             pose_r_deg=self.pose_r_deg * severity)
@@ -139,6 +143,8 @@ def sense(img: DepthImage, k: Intrinsics, model: SensorModel, rng: np.random.Gen
     if hi > lo:
         p_drop = np.clip((angle - lo) / (hi - lo), 0.0, 1.0)
         valid &= rng.random(z.shape) >= p_drop
+    else:  # no ramp: a hard cut
+        valid &= angle <= lo
     z[~valid] = np.inf
     valid &= _long_runs(z, model.edge_jump_m, model.min_run_px)
     z[~valid] = np.inf
@@ -157,7 +163,8 @@ def _long_runs(z: np.ndarray, jump: float, min_run: int) -> np.ndarray:
     if min_run <= 1:
         return np.isfinite(z)
     finite = np.isfinite(z)
-    same = finite[:, 1:] & finite[:, :-1] & (np.abs(np.diff(np.where(finite, z, 0.0), axis=1)) < jump)
+    step = np.abs(np.diff(np.where(finite, z, 0.0), axis=1))
+    same = finite[:, 1:] & finite[:, :-1] & (step < jump)
     h, w = z.shape
     # a run starts at column 0 and wherever a pixel is not of one surface with its left one
     starts = np.concatenate([np.ones((h, 1), bool), ~same], axis=1)
@@ -190,7 +197,8 @@ def pose_error(model: SensorModel, rng: np.random.Generator) -> np.ndarray:
     ``pose_r_deg`` about a random axis."""
     e = np.eye(4)
     axis = rng.normal(size=3)
-    e[:3, :3] = Rotation.from_rotvec(np.radians(model.pose_r_deg) * axis / np.linalg.norm(axis)).as_matrix()
+    rotvec = np.radians(model.pose_r_deg) * axis / np.linalg.norm(axis)
+    e[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
     t = rng.normal(size=3)
     e[:3, 3] = model.pose_t_m * t / np.linalg.norm(t)
     return e

@@ -118,7 +118,8 @@ def _up_in_wall(normal: np.ndarray, up: np.ndarray | None, s: WallSettings) -> n
     angle = np.degrees(np.arccos(min(1.0, abs(float(up @ normal)))))
     if angle < s.min_up_angle_deg:
         raise InputError(f"--up {up.round(3).tolist()}: {angle:.0f}° from the wall's normal "
-                         f"(need ≥ {s.min_up_angle_deg:.0f}°; up runs along a wall, not into it)")
+                         f"(need ≥ {s.min_up_angle_deg:.0f}°; up runs along a wall, not into "
+                         "it)")
     z = up - (up @ normal) * normal
     return z / np.linalg.norm(z)
 
@@ -141,7 +142,8 @@ def support_frame(points: np.ndarray, up: np.ndarray | None = None,
                    .voxel_down_sample(s.voxel_m).points)
     n, d, wall = _plane(a, s)
     if wall.mean() < s.min_wall_share:
-        raise InputError(f"{name}: no wall plane (the largest plane holds {100 * wall.mean():.0f} % "
+        raise InputError(f"{name}: no wall plane (the largest plane holds "
+                         f"{100 * wall.mean():.0f} % "
                          f"of the points, need ≥ {100 * s.min_wall_share:.0f} %) — is the wall "
                          "behind the hook in view?")
     z = _up_in_wall(n, up, s)
