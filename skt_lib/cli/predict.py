@@ -73,6 +73,10 @@ def predict_cloud(predictor: SktPredictor, points: np.ndarray, units: str = "m",
                   ) -> Prediction:
     cloud, counts, warnings = prepare_cloud(points, predictor.cfg.n_points, units, frame, seed,
                                             name)
+    distinct, need = len(np.unique(cloud, axis=0)), predictor.cfg.centres[0]
+    if distinct < need:  # the network's first farthest-point sample needs that many
+        raise InputError(f"{name}: {distinct} distinct points left on the structure after "
+                         f"cleaning, the model needs at least {need}")
     return Prediction(predictor.predict(cloud), cloud, counts, tuple(warnings))
 
 

@@ -78,6 +78,9 @@ ROWS = {
     "all views of a render_views NPZ": lambda t, d, v, p: (
         _predict(_npz(t / "x.npz", points=np.stack([v, v])), d),
         "x.npz: expected an (N, 3) array of x, y, z, got shape (2, 1000, 3)"),
+    "fewer distinct points than the network samples": lambda t, d, v, p: (
+        _predict(_npy(t / "x.npy", v[:120]), d),
+        "distinct points left on the structure after cleaning, the model needs at least 128"),
     "a cloud of a bare wall, no hook": lambda t, d, v, p: (
         _predict(_npy(t / "wall.npy", _bare_wall()), d), "wall.npy: no structure stands off the wall"),
     "--camera, a cloud with no plane": lambda t, d, v, p: (
@@ -94,6 +97,21 @@ ROWS = {
         "wall.npy: median range 418 m from the camera — a cloud in millimetres?"),
     "--camera without --up or --level": lambda t, d, v, p: (
         _predict(_npy(t / "wall.npy", _camera_wall()), d, "--camera"),
+        "--camera needs exactly one of --up X Y Z (camera frame) or --level"),
+    "--camera --up of zeros": lambda t, d, v, p: (
+        _predict(_npy(t / "wall.npy", _camera_wall()), d, "--camera", "--up", "0", "0", "0"),
+        "--up: expected three finite numbers, not all zero"),
+    "--camera --level, the wall sideways in the image": lambda t, d, v, p: (
+        _predict(_npy(t / "wall.npy", _camera_wall()[:, [2, 0, 1]]), d, "--camera", "--level"),
+        "--level: the wall faces sideways in the image"),
+    "--up without --camera": lambda t, d, v, p: (
+        _predict(_npy(t / "x.npy", v), d, "--up", "0", "0", "1"),
+        "--up and --level go with --camera"),
+    "--level without --camera": lambda t, d, v, p: (
+        _predict(_npy(t / "x.npy", v), d, "--level"), "--up and --level go with --camera"),
+    "--camera with --up and --level": lambda t, d, v, p: (
+        _predict(_npy(t / "wall.npy", _camera_wall()), d, "--camera", "--level", "--up", "0", "-1",
+                 "0"),
         "--camera needs exactly one of --up X Y Z (camera frame) or --level"),
     "--camera with --frame": lambda t, d, v, p: (
         _predict(_npy(t / "wall.npy", _camera_wall()), d, "--camera", "--level", "--frame",
