@@ -159,8 +159,9 @@ def _camera_cloud(data_root, view: int = 10):
 
 def test_camera_mode_finds_the_frame_and_writes_the_skt_in_both_frames(capsys, data_root,
                                                                         tmp_path):
-    from skt_lib.geometry.se3 import invert
     from scipy.spatial.transform import Rotation
+
+    from skt_lib.geometry.se3 import invert
 
     points, pose = _camera_cloud(data_root)
     np.save(tmp_path / "raw.npy", points)
@@ -169,11 +170,20 @@ def test_camera_mode_finds_the_frame_and_writes_the_skt_in_both_frames(capsys, d
                    "--up", *map(str, up))
     level = _predict(capsys, data_root, tmp_path / "raw.npy", tmp_path / "level.json",
                      "--camera", "--level")
-    for doc in (got, level):
+    np.save(tmp_path / "raw_mm.npy", 1000 * points)
+    mm = _predict(capsys, data_root, tmp_path / "raw_mm.npy", tmp_path / "mm.json", "--camera",
+                  "--up", *map(str, up), "--units", "mm")
+
+    def error(a, b):  # (m, degrees) between two camera-to-support transforms
+        e = np.array(a) @ invert(np.array(b))
+        return np.linalg.norm(e[:3, 3]), np.degrees(Rotation.from_matrix(e[:3, :3]).magnitude())
+
+    for doc in (got, level, mm):
         est = np.array(doc["camera"]["camera_to_support"])
-        err = est @ invert(pose)
-        assert np.linalg.norm(err[:3, 3]) <= 0.005
-        assert np.degrees(Rotation.from_matrix(err[:3, :3]).magnitude()) <= 2.0
+        t_m, r_deg = error(est, pose)
+        assert t_m <= 0.005 and r_deg <= 2.0
+        np.testing.assert_allclose(est[:3, :3] @ est[:3, :3].T, np.eye(3), atol=1e-9)
+        np.testing.assert_array_equal(est[3], [0.0, 0.0, 0.0, 1.0])
         # the camera-frame SKT is the support-frame one through the estimated transform
         to_cam = invert(est)
         for w, c in zip(doc["waypoints"], doc["camera"]["waypoints"]):
@@ -184,6 +194,11 @@ def test_camera_mode_finds_the_frame_and_writes_the_skt_in_both_frames(capsys, d
                                    to_cam[:3, :3] @ doc["contact_point"] + to_cam[:3, 3], atol=1e-9)
         assert doc["cleaning"]["n_wall"] > 10 * len(doc["points"])  # the wall was removed
         assert doc["warnings"] == []  # what the model saw looks like a training view
+    # gravity and a level camera find (nearly) the same frame; millimetres the same as metres
+    t_m, r_deg = error(got["camera"]["camera_to_support"], level["camera"]["camera_to_support"])
+    assert t_m <= 0.001 and r_deg <= 0.5
+    t_m, r_deg = error(got["camera"]["camera_to_support"], mm["camera"]["camera_to_support"])
+    assert t_m <= 1e-4 and r_deg <= 0.01
     # without --camera the same file is taken to be in the support frame: no camera block
     np.save(tmp_path / "plain.npy", points)
     assert "camera" not in _predict(capsys, data_root, tmp_path / "plain.npy",
