@@ -18,11 +18,11 @@ from types import SimpleNamespace
 import numpy as np
 
 from skt_lib.cli.common import load_predictor, progress
-from skt_lib.cli.items import USER, find_object, find_support, user_dir
 from skt_lib.config import load_params
 from skt_lib.errors import InputError
 from skt_lib.eval.methods import LEARNED, make_method
 from skt_lib.eval.protocol import make_task, trial_settings
+from skt_lib.items import USER, find_object, find_support, user_dir
 from skt_lib.sim.execute import run_trial
 
 METHODS = ("sctdn", "template_only", "oracle", "oracle_floating", "kpam")

@@ -20,7 +20,6 @@ import numpy as np
 import trimesh
 
 from skt_lib.cli.common import existing_file, progress
-from skt_lib.cli.items import OBJECT_RECORD, user_dir
 from skt_lib.config import load_params
 from skt_lib.errors import InputError, MeshError
 from skt_lib.geometry.aperture import find_aperture, object_frame
@@ -34,6 +33,7 @@ from skt_lib.geometry.repair import UNITS, load_solid
 from skt_lib.geometry.simplify import Simplified
 from skt_lib.geometry.se3 import invert, matrix_to_quat, pose_matrix, transform_points
 from skt_lib.io import write_json_atomic
+from skt_lib.items import OBJECT_RECORD, user_dir
 from skt_lib.sim.contact_sim import ROD_ARM, ROD_SITE, HangTask, simulate_hangs
 from skt_lib.sim.keypoints import keypoint_from_hang
 

@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 
 from skt_lib.cli.import_mesh import _move_into_place, import_parser, mesh_record, run_import
-from skt_lib.cli.items import SUPPORT_RECORD, user_dir
 from skt_lib.errors import InputError, MeshError
 from skt_lib.geometry.build import SUPPORT_RGBA
 from skt_lib.geometry.centreline import hang_candidates
@@ -36,6 +35,7 @@ from skt_lib.geometry.se3 import pose_matrix, transform_points
 from skt_lib.geometry.skt import arc_length
 from skt_lib.geometry.supports import PLATE_THICKNESS_M
 from skt_lib.io import read_table, write_json_atomic
+from skt_lib.items import SUPPORT_RECORD, user_dir
 from skt_lib.perception.views import RenderTask, render_support
 from skt_lib.planning.skts import REACH_TOL_M, SktTask, load_probe_objects, plan_support_skts
 from skt_lib.schemas import OBJECTS

@@ -9,7 +9,6 @@ support's stored SKTs (:data:`~skt_lib.eval.methods.FALLS_BACK_TO_STORED`).
 """
 
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,36 +21,13 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
 from skt_lib.geometry.skt import resample
 from skt_lib.io import read_npz, read_table
+from skt_lib.items import TestObject, TestSupport
 from skt_lib.perception.views import RENDER_SPEC
 from skt_lib.schemas import KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 from skt_lib.seeding import item_rng
 from skt_lib.sim.contact_sim import perturbation
 from skt_lib.sim.execute import TrialSettings, TrialTask
-from skt_lib.sim.grasp import Grasp, grasp_candidates
-
-
-@dataclass(frozen=True, eq=False)
-class TestSupport:
-    support_id: str
-    difficulty: str
-    family: str
-    urdf: str
-    mesh: str
-    gt: np.ndarray  # (T, 3) ground-truth SKT, ξ_0 first
-    cloud: np.ndarray  # (N, 3) the view the methods see
-    view: int
-    others: tuple[np.ndarray, ...] = ()  # the support's further stored SKTs (T, 3), in order
-
-
-@dataclass(frozen=True, eq=False)
-class TestObject:
-    object_id: str
-    category: str
-    urdf: str
-    mesh: str
-    keypoint: np.ndarray  # (4, 4) keypoint frame in the object frame
-    grasps: tuple[Grasp, ...]  # grasp candidates (grasp target in the keypoint frame), in order
-    radius_m: float  # farthest object point from the keypoint
+from skt_lib.sim.grasp import grasp_candidates
 
 
 def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_deg=(0.0,),

@@ -14,10 +14,17 @@ from pathlib import Path
 
 import pandas as pd
 
-from skt_lib.cli.items import OBJECT_RECORD, SUPPORT_RECORD, find_object, find_support, user_dir
 from skt_lib.errors import InputError
-from skt_lib.eval.protocol import TestObject, TestSupport
 from skt_lib.eval.rounds import run_rounds
+from skt_lib.items import (
+    OBJECT_RECORD,
+    SUPPORT_RECORD,
+    TestObject,
+    TestSupport,
+    find_object,
+    find_support,
+    user_dir,
+)
 
 
 def load_user_items(root: Path, params) -> tuple[list[TestSupport], list[TestObject], dict]:
