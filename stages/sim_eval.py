@@ -20,9 +20,8 @@ import pandas as pd
 
 from skt_lib.config import load_params
 from skt_lib.errors import DataError
-from skt_lib.eval.methods import MODEL_OF, load_models, make_method
+from skt_lib.eval.methods import load_models, method_for
 from skt_lib.eval.metrics import sim_metrics
-from skt_lib.eval.omnihang import OmniHangSettings
 from skt_lib.eval.protocol import (
     load_test_set,
     per_pair,
@@ -37,7 +36,6 @@ from skt_lib.eval.user_items import load_user_items, run_user_trials, user_metri
 from skt_lib.geometry.export import read_obj
 from skt_lib.io import write_table
 from skt_lib.schemas import TRIALS
-from skt_lib.seeding import item_rng
 from skt_lib.sim.execute import run_trial
 from stages._common import item_store, parse_args, run_items
 from viz.report import write_metrics, write_run_log
@@ -57,23 +55,12 @@ def main(argv=None) -> int:
     if not supports or not objects:
         raise DataError(f"{root}: no test supports with a ground-truth SKT or no test objects")
     models = load_models(root, p.methods, T)
-    pre = np.asarray(p.kpam_pre_hang_m, float)
     omni_points = reference_points(root) if "omnihang" in p.methods else None
-    omni_settings = OmniHangSettings(
-        start_offset_m=(float(np.mean(params.rrt_skts.start_dx_m)), 0.0,
-                        float(np.mean(params.rrt_skts.start_dz_m))),
-        max_checks=p.omnihang_max_checks)
     seed = params.common.seed
-
-    def make(m: str, s):
-        rng = item_rng(seed, f"sim_eval/{m}", s.support_id)
-        omni = (omni_points, omni_settings, int(rng.integers(2**31))) if m == "omnihang" else None
-        return make_method(m, models.get(MODEL_OF.get(m)), s.gt, pre, p.kpam_lift_m, rng=rng,
-                           n_proposals=p.n_proposals, omnihang=omni)
-
     extra_s, extra_o, user_md5 = load_user_items(root, params)
     positions, seconds, made, fallbacks = predict_all(
-        {m: (lambda s, m=m: make(m, s)) for m in p.methods}, [*supports, *extra_s])
+        {m: (lambda s, m=m: method_for(m, s.support_id, s.gt, params, models, omni_points))
+         for m in p.methods}, [*supports, *extra_s])
     fallbacks = {key: f[:p.setup_fallbacks] for key, f in fallbacks.items()}
     settings = trial_settings(p, params.contact_sim)
     log.info("%d (method, test support, object) pairs: %d methods × %d test supports × %d "

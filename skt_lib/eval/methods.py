@@ -1,8 +1,9 @@
 """The evaluated methods, all behind ``predict(cloud) -> Skt`` (Table I rows).
 
 - ``sctdn``: the trained SCTDN (classification, affordance, deformation).
-- ``template_only``: the same network's predicted template, aligned at its predicted
-  contact point, not deformed (the paper's ablation row).
+- ``template_only``: the same network's predicted template, placed at its predicted
+  contact point (ξ_0 the model's ``release_lift_m`` above it), not deformed (the paper's
+  ablation row).
 - ``oracle``: a ground-truth SKT of the support (privileged: built per support).
 - ``oracle_floating``: the same SKT as ``oracle``, executed by a floating hand (a kinematic
   anchor, no arm: :mod:`skt_lib.sim.execute`), to separate what the data allows from what
@@ -30,6 +31,7 @@ from skt_lib.errors import DataError
 from skt_lib.geometry.skt import skt_frames
 from skt_lib.learning.predictor import Skt, SktPredictor
 from skt_lib.learning.vatmart import VatMartPredictor
+from skt_lib.seeding import item_rng
 
 #: Methods that need a trained model: SktPredictor ones, then the VAT-Mart proposers.
 LEARNED = ("template_only", "sctdn", "sctdn_cp_feature")
@@ -37,6 +39,9 @@ PROPOSING = ("vatmart", "vatmart_mod")
 #: Which trained model a learned method runs (``data/train`` or ``data/train_baselines/<name>``).
 MODEL_OF = {"template_only": "sctdn", "sctdn": "sctdn", "sctdn_cp_feature": "sctdn_cp_feature",
             "vatmart": "vatmart", "vatmart_mod": "vatmart_mod"}
+#: Methods built from the support's ground truth (privileged): the oracles follow a stored SKT,
+#: kpam and omnihang aim at its hang (ξ_0). No ground truth, no such method.
+PRIVILEGED = ("oracle", "oracle_floating", "kpam", "omnihang")
 #: Methods executed by the floating hand; every other method uses the Panda.
 FLOATING = ("oracle_floating",)
 #: Methods whose set-up chooses among the support's stored (ground-truth) SKTs: the first
@@ -153,13 +158,56 @@ def make_method(name: str, predictor, gt_positions: np.ndarray, pre_hang: np.nda
     raise ValueError(f"method: unknown {name!r}")
 
 
+def method_for(name: str, support_id: str, gt_positions: np.ndarray | None, params,
+               models: dict, omni_points: np.ndarray | None = None,
+               n_proposals: int | None = None) -> Method:
+    """The method ``name`` for one support as ``sim_eval`` builds it: the proposers' latents
+    and omnihang's planner seed from ``item_rng(common.seed, "sim_eval/<name>", support_id)``,
+    so a support's SKTs are the same wherever they are made (``skt hang`` too).
+
+    ``gt_positions (T, 3)``: the support's ground truth (None: only for methods outside
+    :data:`PRIVILEGED`); ``models``: :func:`load_models`'s; ``omni_points``: the reference
+    object's surface samples (:func:`~skt_lib.eval.protocol.reference_points`; omnihang only);
+    ``n_proposals``: the proposers' count (default ``sim_eval.n_proposals``; the first ``k``
+    proposals do not depend on it)."""
+    from skt_lib.eval.omnihang import OmniHangSettings
+
+    if gt_positions is None and name in PRIVILEGED:
+        raise ValueError(f"{name}: privileged, needs the support's ground-truth SKT")
+    p = params.sim_eval
+    rng = item_rng(params.common.seed, f"sim_eval/{name}", support_id)
+    omni = None
+    if name == "omnihang":
+        settings = OmniHangSettings(
+            start_offset_m=(float(np.mean(params.rrt_skts.start_dx_m)), 0.0,
+                            float(np.mean(params.rrt_skts.start_dz_m))),
+            max_checks=p.omnihang_max_checks)
+        omni = (omni_points, settings, int(rng.integers(2**31)))
+    return make_method(name, models.get(MODEL_OF.get(name)), gt_positions,
+                       np.asarray(p.kpam_pre_hang_m, float), p.kpam_lift_m, rng=rng,
+                       n_proposals=n_proposals or p.n_proposals, omnihang=omni)
+
+
+def model_dir(root: Path, method: str) -> Path:
+    """Where the trained model of learned ``method`` lives under the data root ``root``:
+    ``train/`` (SCTDN) or ``train_baselines/<model>/``."""
+    name = MODEL_OF[method]
+    return root / "train" if name == "sctdn" else root / "train_baselines" / name
+
+
+def load_model(method: str, d: Path, T: int):
+    """The trained model of learned ``method`` from the folder ``d``; :class:`DataError` if it
+    cannot be loaded or predicts other than ``T`` waypoints."""
+    model = (VatMartPredictor if MODEL_OF[method] in PROPOSING else SktPredictor).load(d)
+    if model.cfg.T != T:
+        raise DataError(f"{d}: model predicts T = {model.cfg.T}, clustering.T is {T}")
+    return model
+
+
 def load_models(root: Path, methods, T: int) -> dict:
     """The trained models the ``methods`` need, by :data:`MODEL_OF` name."""
     models = {}
-    for name in dict.fromkeys(MODEL_OF[m] for m in methods if m in MODEL_OF):
-        d = root / "train" if name == "sctdn" else root / "train_baselines" / name
-        model = (VatMartPredictor if name in PROPOSING else SktPredictor).load(d)
-        if model.cfg.T != T:
-            raise DataError(f"{d}: model predicts T = {model.cfg.T}, clustering.T is {T}")
-        models[name] = model
+    for m in methods:
+        if m in MODEL_OF and MODEL_OF[m] not in models:
+            models[MODEL_OF[m]] = load_model(m, model_dir(root, m), T)
     return models

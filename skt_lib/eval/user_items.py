@@ -15,6 +15,7 @@ from pathlib import Path
 import pandas as pd
 
 from skt_lib.errors import InputError
+from skt_lib.eval.methods import PRIVILEGED
 from skt_lib.eval.rounds import run_rounds
 from skt_lib.items import (
     OBJECT_RECORD,
@@ -35,7 +36,9 @@ def load_user_items(root: Path, params) -> tuple[list[TestSupport], list[TestObj
             if not user_dir(root, kind, name).is_dir():
                 raise InputError(f"sim_eval.extra_{kind}s: {name!r} is not imported "
                                  f"({user_dir(root, kind, name)} missing; use skt import-{kind})")
-    supports = [find_support(n, root, params) for n in p.extra_supports]
+    privileged = [m for m in p.methods if m in PRIVILEGED]
+    need = f"sim_eval.methods {privileged} need one" if privileged else None
+    supports = [find_support(n, root, params, gt_for=need) for n in p.extra_supports]
     objects = [find_object(n, root, params) for n in p.extra_objects]
     md5 = {f"{kind}/{n}": hashlib.md5((user_dir(root, kind, n) / rec).read_bytes()).hexdigest()
            for kind, names, rec in (("support", p.extra_supports, SUPPORT_RECORD),

@@ -14,7 +14,7 @@ from skt_lib.io import read_npz
 from skt_lib.perception.views import RENDER_SPEC
 
 STAGES = ("mesh_gen", "contact_sim", "rotation_extraction", "rrt_skts", "render_views",
-          "affordance_maps", "clustering", "train")
+          "affordance_maps", "clustering", "train", "train_baselines")
 EASY_SUPPORT, OBJECT = "support_00008", "object_mug_000"  # tiny preset: an easy test support
 
 

@@ -130,6 +130,30 @@ ROWS = {
         ["predict", _npy(t / "x.npy", v), "--model", _corrupt_model(t, d), "-o", "OUT/skt.json"],
         "cannot load the SCTDN checkpoint"),
     "unknown --method": lambda t, d, v, p: (_hang(d, p, method="magic"), "invalid choice: 'magic'"),
+    "--proposals 0": lambda t, d, v, p: (_hang(d, p, EASY_SUPPORT, OBJECT, "vatmart",
+                                               "--proposals", "0"),
+                                         "argument --proposals: expected a whole number from 1"),
+    "--proposals with a method that does not propose": lambda t, d, v, p: (
+        _hang(d, p, EASY_SUPPORT, OBJECT, "sctdn", "--proposals", "3"),
+        "--proposals goes with a proposing method (vatmart, vatmart_mod), not --method sctdn"),
+    "--model with a method that runs no model": lambda t, d, v, p: (
+        _hang(d, p, EASY_SUPPORT, OBJECT, "kpam", "--model", d / "train"),
+        "--model goes with a learned method"),
+    "the method's trained model missing": lambda t, d, v, p: (
+        _hang(_without(t, d, "train_baselines"), p, EASY_SUPPORT, OBJECT, "sctdn_cp_feature"),
+        "train_baselines/sctdn_cp_feature: no such model folder: --method sctdn_cp_feature needs "
+        "the trained sctdn_cp_feature model"),
+    "--model missing, a mesh file to --keep": lambda t, d, v, p: (
+        _hang(d, p, _box(t / "hook.stl", 0.05), OBJECT, "vatmart_mod", "--keep", "--model",
+              t / "no_model"),
+        "no_model: no such model folder: --method vatmart_mod needs"),
+    "corrupt VAT-Mart checkpoint": lambda t, d, v, p: (
+        _hang(d, p, EASY_SUPPORT, OBJECT, "vatmart", "--model", _corrupt_vatmart(t, d)),
+        "cannot load the VAT-Mart checkpoint"),
+    "privileged method, support without a ground-truth SKT": lambda t, d, v, p: (
+        _hang(d, p, _without_skt(d), OBJECT, "omnihang"),
+        f"{_without_skt(d)}: has no ground-truth SKT in {d / 'rrt_skts' / 'skts.parquet'} (the "
+        "planner failed on it); --method omnihang is privileged"),
     "unknown support": lambda t, d, v, p: (_hang(d, p, support="support_99999"),
                                            "support_99999: no such support"),
     "unknown object": lambda t, d, v, p: (_hang(d, p, obj="object_teapot_000"),
@@ -153,6 +177,28 @@ ROWS = {
     "import: bad --name": lambda t, d, v, p: (_import(_box(t / "b.obj", 0.1), d, p, "a/b"),
                                               "--name: 'a/b' must be"),
 }
+
+
+#: Rows that argparse refuses (it exits instead of returning).
+ARGPARSE = {"unknown --method", "--proposals 0"}
+
+
+def _without(t, d, stage):
+    """A data root in ``t`` with ``d``'s stage folders but ``stage``'s."""
+    root = t / "root"
+    root.mkdir()
+    for entry in d.iterdir():
+        if entry.name not in (stage, "user"):
+            (root / entry.name).symlink_to(entry, target_is_directory=True)
+    return root
+
+
+def _corrupt_vatmart(t, d):
+    m = t / "model"
+    m.mkdir()
+    shutil.copy(d / "train_baselines" / "vatmart" / "vatmart.json", m / "vatmart.json")
+    _write(m / "vatmart.pt", b"PK\x03\x04 not a checkpoint")
+    return m
 
 
 def _without_skt(d) -> str:
@@ -210,7 +256,7 @@ def test_bad_input(row, capsys, tmp_path, data_root, view, tiny_dataset):
     args, expected = ROWS[row](tmp_path, data_root, view, params)
     args = [str(a).replace("OUT", str(tmp_path / "OUT")) for a in args]
     before = tree_state(data_root)
-    rc, out, err = run_skt(capsys, *args) if row != "unknown --method" else _argparse(capsys, args)
+    rc, out, err = run_skt(capsys, *args) if row not in ARGPARSE else _argparse(capsys, args)
     assert rc == 2, (row, err)
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("ERROR:"), err
