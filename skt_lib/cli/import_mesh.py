@@ -3,7 +3,7 @@
 The mesh (any format trimesh reads) is scaled to metres (``--units``), repaired or refused
 (:mod:`skt_lib.geometry.repair`), its hanging aperture found — the through-hole that admits
 the largest rod (:mod:`skt_lib.geometry.aperture`; ``--aperture-point/--aperture-axis``
-override it) — and moved into the object frame of README "Frames". CoACD splits it into
+override it) — and moved into the object frame of docs/frames.md. CoACD splits it into
 convex parts written in ``mesh_gen``'s compound-of-hulls format with a URDF; it is hung on
 the test rod as ``contact_sim`` hangs objects, and its keypoint extracted as
 ``rotation_extraction`` does. The result lives in ``<data-root>/user/objects/<name>/``

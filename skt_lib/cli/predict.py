@@ -5,7 +5,7 @@ The cloud is scaled to metres (``--units``), moved into the support frame (``--f
 cleaned (:func:`skt_lib.perception.pointcloud.clean_cloud`), brought to the model's N points
 by the same farthest-point sampling and shuffle as every training view
 (:func:`skt_lib.perception.pointcloud.sample_to`) and predicted; the SKT is written as JSON
-(schema in README, "Command line").
+(schema ``skt``, key by key in docs/cli.md, "``skt.json``").
 """
 
 import sys
