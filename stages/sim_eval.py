@@ -88,7 +88,7 @@ def main(argv=None) -> int:
     pairs = per_pair(trials)
     plans = {s.support_id: made["omnihang", s.support_id].last
              for s in supports} if "omnihang" in p.methods else None
-    metrics = sim_metrics(trials, pairs, p.methods, p.n_proposals, plans)
+    metrics = sim_metrics(trials, pairs, p.methods, p.n_proposals, plans, seed)
     metrics["n_test_supports"] = len(supports)
     metrics["n_test_supports_without_gt"] = len(missing)
     metrics["n_test_objects"] = len(objects)

@@ -3,7 +3,8 @@ paired evidence, and success conditioned on what the privileged oracle can do.""
 
 import pandas as pd
 
-from skt_lib.eval.stats import paired_comparison
+from skt_lib.eval.stats import paired_comparison, paired_support_interval
+from skt_lib.seeding import item_rng
 
 #: (claim, A, B, level, margin, strict): "A > B + margin" (strict) or "A ≥ B + margin" on
 #: ``level`` ("all": pooled), as the paper's Table I and II order them.
@@ -16,13 +17,21 @@ PAPER_ORDERINGS = (
 )
 
 
+#: Verdicts of an ordering on the support-bootstrap interval of A − B against its margin.
+SHOWN, REVERSED, UNDECIDED = "shown", "reversed", "undecided"
+
+
 def check_orderings(pairs: pd.DataFrame, orderings=PAPER_ORDERINGS,
-                    within: pd.Series | None = None) -> list[dict]:
+                    within: pd.Series | None = None, seed: int = 0) -> list[dict]:
     """For each ordering whose methods both ran: rates of A and B on the same (support,
-    object) pairs of the level, whether it holds, and the exact McNemar test of A against B
-    on those pairs. ``pairs``: one row per (method, support, object)
-    (:func:`skt_lib.eval.protocol.per_pair`); ``within``: a boolean Series on (support_id,
-    object_id) keeping only the pairs where it is true (e.g. those the oracle hung)."""
+    object) pairs of the level, whether it holds, the exact McNemar test of A against B on
+    those pairs, and the 95 % interval of A − B from a bootstrap over test supports
+    (``diff_ci95``; drawn by ``item_rng(seed, "sim_eval/bootstrap", claim)``) with its verdict: ``shown`` when the whole
+    interval clears the margin (strictly where the claim is strict), ``reversed`` when it
+    lies wholly on the other side, else ``undecided``. ``pairs``: one row per (method,
+    support, object) (:func:`skt_lib.eval.protocol.per_pair`); ``within``: a boolean Series
+    on (support_id, object_id) keeping only the pairs where it is true (e.g. those the
+    oracle hung)."""
     if within is not None:
         keep = pd.MultiIndex.from_frame(pairs[["support_id", "object_id"]]).isin(
             within[within].index)
@@ -40,11 +49,25 @@ def check_orderings(pairs: pd.DataFrame, orderings=PAPER_ORDERINGS,
         gap = ra - rb - margin
         holds = gap > 1e-12 if strict else gap >= -1e-12  # 0.6 + 0.1 must reach 0.7
         c = paired_comparison(fa.to_numpy(), fb.to_numpy())
+        ci = paired_support_interval(fa.to_numpy(), fb.to_numpy(),
+                                     fa.index.get_level_values("support_id").to_numpy(),
+                                     item_rng(seed, "sim_eval/bootstrap", claim))
         out.append({"claim": claim, "a": a, "b": b, "level": level, "rate_a": ra, "rate_b": rb,
                     "holds": bool(holds), "n_pairs": c.n_pairs, "n_a_only": c.n_a_only,
                     "n_b_only": c.n_b_only, "p_value": c.p_value,
-                    "verdict": c.verdict})
+                    "verdict": c.verdict, "diff": ra - rb, "diff_ci95": list(ci),
+                    "n_supports": int(fa.index.get_level_values("support_id").nunique()),
+                    "support_verdict": _support_verdict(ci, margin, strict)})
     return out
+
+
+def _support_verdict(ci: tuple[float, float], margin: float, strict: bool) -> str:
+    lo, hi = ci
+    if lo > margin or (not strict and lo >= margin - 1e-12):
+        return SHOWN
+    if hi < margin or (strict and hi <= margin + 1e-12):
+        return REVERSED
+    return UNDECIDED
 
 
 def explain(check: dict, oracle_rate: float | None, on_oracle_hung: dict | None) -> str:

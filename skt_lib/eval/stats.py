@@ -157,6 +157,34 @@ def paired_comparisons(trials, reference: str, alpha: float = 0.05) -> dict:
     return out
 
 
+def support_ci95(pairs, levels, rng: np.random.Generator, n_boot: int = 2000) -> dict:
+    """``{method: {"all": [lo, hi], <level>: [lo, hi] | None, …}}``: 95 % intervals of the
+    success rate per method from a bootstrap over test supports (a support's pairs drawn
+    together: its objects mostly hang or fail together, so the support is the unit of
+    evidence), over all pairs and per level; columns ``method``, ``support_id``,
+    ``difficulty``, ``success``. ``None`` where a level has no pairs."""
+    out = {}
+    for method, g in pairs.groupby("method", sort=False):
+        out[method] = {}
+        for level in ("all", *levels):
+            sub = g if level == "all" else g[g["difficulty"] == level]
+            ci = bootstrap_mean_interval(sub["success"].to_numpy(float), sub["support_id"].to_numpy(),
+                                         rng, n_boot)
+            out[method][level] = None if ci is None else [ci[0], ci[1]]
+    return out
+
+
+def paired_support_interval(a, b, groups, rng: np.random.Generator, n_boot: int = 2000
+                            ) -> tuple[float, float] | None:
+    """95 % interval of the mean difference ``a − b`` (success flags of two methods on the
+    same pairs, element ``i`` the same pair) under a bootstrap over ``groups`` (the pairs'
+    supports, drawn with all their pairs)."""
+    a, b = _flags(a, "a"), _flags(b, "b")
+    if a.shape != b.shape:
+        raise ValueError(f"a, b: need the same pairs, got {a.shape} and {b.shape}")
+    return bootstrap_mean_interval(a.astype(float) - b.astype(float), groups, rng, n_boot)
+
+
 def _ci(success) -> list[float] | None:
     ci = wilson_interval(int(np.asarray(success, bool).sum()), len(success))
     return None if ci is None else [ci[0], ci[1]]

@@ -72,3 +72,38 @@ def test_success_given_the_oracle_splits_on_its_verdict():
                             "n_ref_failed": 2, "on_ref_failed": 0.5}
     assert got["oracle"]["on_ref_ok"] == 1.0 and got["oracle"]["on_ref_failed"] == 0.0
     assert success_given(pairs[pairs["method"] != "oracle"], "oracle") == {}
+
+
+def _support_pairs(a_by_support, b_by_support, n_objects=10) -> pd.DataFrame:
+    """Each support's objects hang or fail together for both methods."""
+    rows = []
+    for si, (a, b) in enumerate(zip(a_by_support, b_by_support)):
+        for oi in range(n_objects):
+            for method, ok in (("sctdn", a), ("vatmart_mod", b)):
+                rows.append({"method": method, "support_id": f"s{si}", "object_id": f"o{oi}",
+                             "difficulty": "easy", "success": bool(ok)})
+    return pd.DataFrame(rows)
+
+
+def test_the_support_bootstrap_judges_an_ordering_that_mcnemar_calls_certain():
+    """sctdn hangs 3 supports vatmart_mod does not and loses 1 (of 20 supports, 10 objects
+    each): McNemar on the 200 pairs calls it (30 vs 10 discordant pairs), but four supports
+    decide it, so on supports the claim is undecided; 12 supports won and none lost shows it;
+    the mirror image is reversed."""
+    a = [1] * 3 + [0] + [1] * 8 + [0] * 8
+    b = [0] * 3 + [1] + [1] * 8 + [0] * 8
+    (c,) = [c for c in check_orderings(_support_pairs(a, b), seed=3) if c["claim"].startswith("sctdn >")]
+    assert c["p_value"] < 0.01 and c["n_supports"] == 20
+    assert c["diff"] == pytest.approx(0.1)
+    lo, hi = c["diff_ci95"]
+    assert lo <= 0.0 < 0.1 < hi and c["support_verdict"] == "undecided"
+    win = [1] * 12 + [0] * 8
+    (c,) = [c for c in check_orderings(_support_pairs(win, [0] * 20), seed=3)
+            if c["claim"].startswith("sctdn >")]
+    assert c["diff_ci95"][0] > 0 and c["support_verdict"] == "shown"
+    (c,) = [c for c in check_orderings(_support_pairs([0] * 20, win), seed=3)
+            if c["claim"].startswith("sctdn >")]
+    assert c["diff_ci95"][1] < 0 and c["support_verdict"] == "reversed"
+    # the same seed gives the same interval; the claim's own generator, not the call order
+    again = check_orderings(_support_pairs(a, b), seed=3)[0]["diff_ci95"]
+    assert again == check_orderings(_support_pairs(a, b), seed=3)[0]["diff_ci95"]

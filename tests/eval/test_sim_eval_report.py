@@ -1,12 +1,13 @@
 """sim_eval's metrics and report carry error bars and paired verdicts (synthetic trials)."""
 
+import numpy as np
 import pandas as pd
 import pytest
 
 from skt_lib.config import LEVELS
 from skt_lib.eval.orderings import check_orderings
 from skt_lib.eval.protocol import success_table
-from skt_lib.eval.stats import paired_comparisons, success_ci95
+from skt_lib.eval.stats import paired_comparisons, success_ci95, support_ci95
 from skt_lib.sim.execute import REASONS
 from skt_lib.eval.report import write_report
 
@@ -30,7 +31,9 @@ def _trials():
 
 def _metrics(trials):
     table, ci = success_table(trials), success_ci95(trials, LEVELS)
+    boot = support_ci95(trials, LEVELS, np.random.default_rng(0))
     m = {k: {"success": table[k], "n_trials": 40, "success_ci95": ci[k],
+             "success_support_ci95": boot[k],
              "failures_by_reason": {r: int(((trials["method"] == k) &
                                             (trials["failure_reason"] == r)).sum())
                                     for r in REASONS}} for k in METHODS}
@@ -50,7 +53,9 @@ def test_report_shows_intervals_and_paired_verdicts(tmp_path):
     # Table I: sctdn 36/40 = 90.0 %, Wilson [76.9–96.0]
     lo, hi = metrics["sctdn"]["success_ci95"]["all"]
     assert (lo, hi) == (pytest.approx(0.7694, abs=5e-4), pytest.approx(0.9604, abs=5e-4))
-    assert "| sctdn | 90.0 [76.9–96.0] |" in text
+    slo, shi = metrics["sctdn"]["success_support_ci95"]["all"]
+    assert slo < 0.9 < shi  # the bootstrap over the 8 supports brackets the rate
+    assert f"| sctdn | 90.0 [76.9–96.0] ‖ {100 * slo:.1f}–{100 * shi:.1f} |" in text
     assert "100.0 [91.2–100.0]" in text  # oracle_floating 40/40
     # per category: sctdn on mugs = 16/20 → 80.0 [58.4–91.9]
     assert "80.0 [58.4–91.9]" in text
@@ -65,4 +70,7 @@ def test_report_shows_intervals_and_paired_verdicts(tmp_path):
     assert row.endswith("| sctdn better |")
     # the one paper ordering both methods of which ran: sctdn (90 %) ≥ template_only (50 %) + 10
     row = next(line for line in text.splitlines() if line.startswith("| sctdn ≥ template_only"))
-    assert row.startswith("| sctdn ≥ template_only + 10 points (all levels) | 90.0 | 50.0 | yes |")
+    assert row.startswith("| sctdn ≥ template_only + 10 points (all levels) | 90.0 | 50.0 | yes | "
+                          "40.0 [")
+    c = next(c for c in metrics["paper_orderings"] if c["claim"].startswith("sctdn ≥"))
+    assert c["n_supports"] == 8 and f"| {c['support_verdict']} | 40 (8) |" in row

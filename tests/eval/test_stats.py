@@ -6,7 +6,8 @@ import pytest
 
 from skt_lib.eval.stats import (
     A_BETTER, B_BETTER, NO_DIFFERENCE, bootstrap_mean_interval, mcnemar_exact_p,
-    paired_comparison, paired_comparisons, success_ci95, wilson_interval,
+    paired_comparison, paired_comparisons, paired_support_interval, success_ci95, support_ci95,
+    wilson_interval,
 )
 
 Z2 = 1.959963984540054 ** 2  # z_{0.975}^2
@@ -152,3 +153,37 @@ def test_bootstrap_weights_supports_by_their_views_and_checks_input():
         bootstrap_mean_interval([1.0, 2.0], ["a"], np.random.default_rng(0))
     with pytest.raises(ValueError, match="finite"):
         bootstrap_mean_interval([1.0, np.nan], ["a", "b"], np.random.default_rng(0))
+
+
+def test_support_ci95_draws_supports_not_pairs():
+    """Two methods at 50 %: one whose supports hang all or nothing (10 objects each), one
+    whose every support hangs half. The first's support interval is wide (4 supports decide
+    it), the second's has no spread at all; Wilson gives both the same interval."""
+    import pandas as pd
+
+    rows = []
+    for si in range(4):
+        for oi in range(10):
+            rows.append({"method": "lumpy", "support_id": f"s{si}", "difficulty": "easy",
+                         "success": si % 2 == 0})
+            rows.append({"method": "even", "support_id": f"s{si}", "difficulty": "easy",
+                         "success": oi % 2 == 0})
+    pairs = pd.DataFrame(rows)
+    got = support_ci95(pairs, ("easy", "hard"), np.random.default_rng(0))
+    assert got["even"]["all"] == pytest.approx([0.5, 0.5])
+    lo, hi = got["lumpy"]["all"]
+    assert lo <= 0.25 and hi >= 0.75  # 4 all-or-nothing supports: 0, 1/4, … 1 of them drawn
+    assert got["lumpy"]["easy"] == got["lumpy"]["all"] and got["lumpy"]["hard"] is None
+    assert success_ci95(pairs, ("easy",))["lumpy"] == success_ci95(pairs, ("easy",))["even"]
+
+
+def test_paired_support_interval_is_of_the_difference_on_the_same_pairs():
+    a = np.array([1, 1, 1, 1, 0, 0, 1, 1], bool)
+    b = np.array([0, 0, 1, 1, 0, 0, 0, 0], bool)
+    groups = np.array(["s0", "s0", "s1", "s1", "s2", "s2", "s3", "s3"])
+    lo, hi = paired_support_interval(a, b, groups, np.random.default_rng(1))
+    # per-support differences 1, 0, 0, 1: the mean 0.5, every resample in [0, 1]
+    assert 0.0 <= lo < 0.5 < hi <= 1.0
+    assert paired_support_interval(a, a, groups, np.random.default_rng(1)) == (0.0, 0.0)
+    with pytest.raises(ValueError, match="same pairs"):
+        paired_support_interval(a, b[:-1], groups, np.random.default_rng(1))
