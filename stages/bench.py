@@ -14,10 +14,12 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
 - ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded;
 - ``cli_predict_ms_median``: ``skt predict``'s prediction of a 1000-point view (cleaning,
   sampling, SCTDN), model loaded, process start excluded;
-- ``sim_trials_per_min``: sim_eval trials (Panda, oracle SKTs, every test object) per minute
-  of wall time on ``compute.n_workers`` workers, over ``per_level`` test supports per level;
-  ``*_reference`` with the reference executor, ``sim_speedup_vs_reference_executor`` the
-  ratio, ``sim_verdict_agreement`` the share of same verdicts (``*_disagreements``: the rest);
+- ``sim_trials_per_min``: sim_eval trials (Panda; the oracle's and SCTDN's SKTs, every test
+  object) per minute of wall time on ``compute.n_workers`` workers, over ``per_level`` test
+  supports per level, with the default executor; ``*_previous`` with the one before it
+  (``fallen_exit``), ``*_reference`` with the reference executor, ``sim_speedup_vs_*`` the
+  ratios; ``sim_verdict_agreement`` (``*_previous``) the share of the reference executor's
+  verdicts the default (previous) executor repeats (``sim_verdict_disagreements*``: the rest);
 - ``import_dense_s_median``: ``skt import-support`` / ``import-object`` of the mesh zoo's
   ≥ 250k-face cases (:mod:`tools.mesh_zoo`), wall seconds per import, process start
   included, one at a time (``import_dense_s``: each; ``import_dense_failed``: any refused).
@@ -29,6 +31,7 @@ import dataclasses
 import json
 import os
 import platform
+import subprocess
 import sys
 import tempfile
 import time
@@ -38,14 +41,14 @@ import numpy as np
 
 from skt_lib.cli.predict import median_predict_ms
 from skt_lib.config import LEVELS, load_params
-from skt_lib.eval.methods import make_method
+from skt_lib.eval.methods import load_models, method_for
 from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
 from skt_lib.io import read_npz, read_table, write_json_atomic
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
 from skt_lib.planning import bench as planner_bench
 from skt_lib.schemas import SUPPORTS
-from skt_lib.sim.execute import run_trial
+from skt_lib.sim.execute import EXECUTORS, TrialSettings, run_trial
 from stages._common import run_items
 from tools.mesh_zoo import bench_dense_imports
 
@@ -93,30 +96,77 @@ def cli_bench(root: Path) -> dict:
     return {"cli_predict_ms_median": median_predict_ms(root / "train", cloud)}
 
 
+#: The methods whose SKTs the executor bench runs: the ground truth (mostly hung) and the
+#: learned SKT (hung and failed by every reason), so that verdicts of both kinds are compared.
+SIM_BENCH_METHODS = ("oracle", "sctdn")
+
+
 def sim_bench(params, root: Path, per_level: int) -> dict:
+    """Every executor of :data:`~skt_lib.sim.execute.EXECUTORS` on the same trials (the SKTs
+    of :data:`SIM_BENCH_METHODS` on ``per_level`` test supports per level × every test object),
+    one after the other on ``compute.n_workers`` workers; each one's verdicts against the
+    reference executor's."""
     p = params.sim_eval
     supports, objects, _ = load_test_set(root, params.clustering.T, params.common.seed,
                                          p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg)
     chosen = [s for lv in LEVELS for s in [s for s in supports if s.difficulty == lv][:per_level]]
+    models = load_models(root, SIM_BENCH_METHODS, params.clustering.T)
     settings = trial_settings(p, params.contact_sim)
-    skts = {s.support_id: make_method("oracle", None, s.gt, np.asarray(p.kpam_pre_hang_m))
-            .predict(s.cloud).positions for s in chosen}
-    runs = {}
-    for name, reference in (("reference", True), ("fast", False)):
-        executor = dataclasses.replace(settings, reference=reference)
-        tasks = [make_task("oracle", s, o, skts[s.support_id], executor)
-                 for s in chosen for o in objects]
+    tasks = []
+    for m in SIM_BENCH_METHODS:
+        for s in chosen:
+            skt = method_for(m, s.support_id, s.gt, params, models).predict(s.cloud)
+            tasks += [make_task(m, s, o, skt.positions, settings,
+                                fallbacks=skt.fallbacks[:p.setup_fallbacks]) for o in objects]
+    verdicts, rates = {}, {}
+    for executor in EXECUTORS:
+        run = [dataclasses.replace(t, settings=dataclasses.replace(settings, executor=executor))
+               for t in tasks]
         t0 = time.perf_counter()
-        results, _, _ = run_items(run_trial, tasks, params.compute, f"bench sim, {name} executor")
-        runs[name] = ([r["row"] for r in results], 60.0 * len(tasks) / (time.perf_counter() - t0))
-    (ref, ref_rate), (fast, rate) = runs["reference"], runs["fast"]
-    verdict = lambda row: row["failure_reason"] or "success"  # noqa: E731
-    differ = [f"{a['trial_id']}: {verdict(a)} → {verdict(b)}" for a, b in zip(ref, fast)
-              if verdict(a) != verdict(b)]
-    return {"sim_trials_per_min": rate, "sim_trials_per_min_reference": ref_rate,
-            "sim_speedup_vs_reference_executor": rate / ref_rate,
-            "sim_verdict_agreement": 1.0 - len(differ) / len(ref),
-            "sim_verdict_disagreements": differ, "sim_bench_trials": len(ref)}
+        results, _, _ = run_items(run_trial, run, params.compute, f"bench sim, {executor}")
+        rates[executor] = 60.0 * len(run) / (time.perf_counter() - t0)
+        verdicts[executor] = [(r["row"]["trial_id"], r["row"]["failure_reason"] or "success")
+                              for r in results]
+    default = TrialSettings.__dataclass_fields__["executor"].default
+    previous = EXECUTORS[EXECUTORS.index(default) - 1]
+    ref = verdicts["reference"]
+    out = {"sim_bench_trials": len(tasks), "sim_bench_executor": default,
+           "sim_bench_failures_reference": sum(v != "success" for _, v in ref),
+           "sim_trials_per_min": rates[default],
+           "sim_trials_per_min_previous": rates[previous],
+           "sim_trials_per_min_reference": rates["reference"],
+           "sim_speedup_vs_previous_executor": rates[default] / rates[previous],
+           "sim_speedup_vs_reference_executor": rates[default] / rates["reference"]}
+    for name, executor in (("", default), ("_previous", previous)):
+        differ = [f"{tid}: {a} → {b}" for (tid, a), (_, b) in zip(ref, verdicts[executor])
+                  if a != b]
+        out[f"sim_verdict_agreement{name}"] = 1.0 - len(differ) / len(ref)
+        out[f"sim_verdict_disagreements{name}"] = differ
+    return out
+
+
+#: The bench's parts, in the order they run, and the key prefixes each one writes.
+PARTS = ("rrt", "sctdn", "cli", "sim", "render", "imports")
+_PREFIXES = {"rrt": "rrt_", "sctdn": "sctdn_", "cli": "cli_", "sim": "sim_", "render": "render_",
+             "imports": "import_"}
+
+
+def _part_of(key: str) -> str | None:
+    """The part that writes ``key`` (None: the run's own keys, e.g. ``machine``)."""
+    return next((part for part, prefix in _PREFIXES.items() if key.startswith(prefix)), None)
+
+
+def _in_tmp(fn):
+    with tempfile.TemporaryDirectory() as tmp:
+        return fn(Path(tmp))
+
+
+def _commit() -> str:
+    """The checked-out commit, ``+dirty`` when tracked files differ from it."""
+    def git(*a):
+        return subprocess.run(["git", *a], capture_output=True, text=True).stdout.strip()
+    head = git("rev-parse", "--short", "HEAD") or "unknown"
+    return head + ("+dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
 
 
 def main(argv=None) -> int:
@@ -130,15 +180,28 @@ def main(argv=None) -> int:
                          "plans each SKT afresh: minutes per very hard support)")
     ap.add_argument("--rrt-skts", type=int, default=50,
                     help="SKTs per support of the planner bench (the paper's 50)")
+    ap.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS),
+                    help="measure only these parts: their keys are replaced, every other "
+                         "part's keys are kept from --out, and 'parts_commit' says which commit "
+                         "measured each part (default: all, written afresh)")
     args = ap.parse_args(argv)
     params, root = load_params(args.params), Path(args.data_root)
-    # fresh: a key this run does not measure must not survive from an old file
-    bench = rrt_bench(params, root, args.rrt_per_level, args.rrt_skts) | sctdn_bench(root) | cli_bench(root)
-    bench |= sim_bench(params, root, args.per_level)
-    with tempfile.TemporaryDirectory() as tmp:
-        bench |= render_bench(params, root, args.per_level, Path(tmp))
-    with tempfile.TemporaryDirectory() as tmp:
-        bench |= bench_dense_imports(Path(args.params), root, Path(tmp))
+    measure = {
+        "rrt": lambda: rrt_bench(params, root, args.rrt_per_level, args.rrt_skts),
+        "sctdn": lambda: sctdn_bench(root), "cli": lambda: cli_bench(root),
+        "sim": lambda: sim_bench(params, root, args.per_level),
+        "render": lambda: _in_tmp(lambda tmp: render_bench(params, root, args.per_level, tmp)),
+        "imports": lambda: _in_tmp(lambda tmp: bench_dense_imports(Path(args.params), root, tmp))}
+    out = Path(args.out)
+    # a full run is fresh: a key this run does not measure must not survive from an old file
+    old = json.loads(out.read_text()) if set(args.parts) != set(PARTS) and out.exists() else {}
+    commit = _commit()
+    bench = {k: v for k, v in old.items() if _part_of(k) not in (*args.parts, None)}
+    bench["parts_commit"] = {part: old.get("parts_commit", {}).get(part, "unknown")
+                             for part in PARTS} | {part: commit for part in args.parts}
+    for part in PARTS:
+        if part in args.parts:
+            bench |= measure[part]()
     bench["machine"] = (f"{platform.machine()}, {os.cpu_count()} cores, "
                         f"{params.compute.n_workers} workers")
     write_json_atomic(Path(args.out), bench)

@@ -3,6 +3,8 @@
 import json
 from types import SimpleNamespace
 
+import pytest
+
 from stages import bench
 
 
@@ -21,8 +23,29 @@ def test_bench_json_is_written_fresh(monkeypatch, tmp_path):
     got = json.loads(out.read_text())
     assert set(got) == {"rrt_plan_s_median", "sctdn_inference_ms_median", "sim_trials_per_min",
                         "render_ms_per_view_median", "cli_predict_ms_median",
-                        "import_dense_s_median", "machine"}
+                        "import_dense_s_median", "machine", "parts_commit"}
     assert got["rrt_plan_s_median"] == 1.0
+    assert set(got["parts_commit"]) == set(bench.PARTS)
+
+
+def test_bench_parts_replace_their_own_keys_and_keep_the_others(monkeypatch, tmp_path):
+    """--parts sim: the sim keys are measured again (a stale one goes), every other part's
+    keys stay as they were, and parts_commit names the commit of each part's figures."""
+    out = tmp_path / "bench.json"
+    out.write_text(json.dumps({"rrt_plan_s_median": 99.0, "sim_trials_per_min": 1.0,
+                               "sim_stale": 7, "parts_commit": {"rrt": "abc", "sim": "abc"}}))
+    monkeypatch.setattr(bench, "load_params", lambda _: SimpleNamespace(
+        compute=SimpleNamespace(n_workers=2)))
+    monkeypatch.setattr(bench, "_commit", lambda: "def")
+    monkeypatch.setattr(bench, "sim_bench", lambda *a: {"sim_trials_per_min": 3.0})
+    for name in ("rrt_bench", "sctdn_bench", "cli_bench", "render_bench", "bench_dense_imports"):
+        monkeypatch.setattr(bench, name, lambda *a: pytest.fail("only sim was asked for"))
+    assert bench.main(["--out", str(out), "--data-root", str(tmp_path), "--parts", "sim"]) == 0
+    got = json.loads(out.read_text())
+    assert got["rrt_plan_s_median"] == 99.0 and got["sim_trials_per_min"] == 3.0
+    assert "sim_stale" not in got
+    assert got["parts_commit"]["rrt"] == "abc" and got["parts_commit"]["sim"] == "def"
+    assert got["parts_commit"]["render"] == "unknown"
 
 
 def test_planner_bench_times_both_planners_on_the_same_supports(tiny_dataset):

@@ -53,23 +53,33 @@ BENCH_ROWS = {
     "cli_predict_ms_median": ("{:.0f} ms", "`skt predict`'s prediction of a 1000-point view: "
                                            "cleaning, sampling, SCTDN; model loaded, process start "
                                            "excluded; median of 30 after 3 warm-up"),
-    "sim_trials_per_min": ("{:.0f}", "`sim_eval` trials (Panda, oracle SKTs, every test object) "
-                                     "per minute of wall time, `compute.n_workers` workers"),
+    "sim_trials_per_min": ("{:.0f}", "`sim_eval` trials (Panda; the oracle's and SCTDN's SKTs, "
+                                     "every test object) per minute of wall time, "
+                                     "`compute.n_workers` workers, the default executor "
+                                     "(`rest_exit`: also ends the settle once the object is at "
+                                     "rest)"),
+    "sim_trials_per_min_previous": ("{:.0f}", "the same trials with the executor before it "
+                                              "(`fallen_exit`), same run"),
     "sim_trials_per_min_reference": ("{:.0f}", "the same trials with the reference executor "
                                                "(numpy IK, the Panda's visual meshes loaded, "
-                                               "every perturbation step)"),
-    "sim_speedup_vs_reference_executor": ("{:.2f}×", "the executor's trials per minute over the "
-                                                     "reference executor's, same run"),
+                                               "every physics step), same run"),
+    "sim_speedup_vs_previous_executor": ("{:.2f}×", "the default executor's trials per minute "
+                                                    "over the previous one's"),
+    "sim_speedup_vs_reference_executor": ("{:.2f}×", "the default executor's trials per minute "
+                                                     "over the reference executor's"),
     "sim_verdict_agreement": ("{:.3f}", "share of those trials whose verdict (failure reason, "
-                                        "or success) both executors agree on"),
+                                        "or success) the default executor and the reference "
+                                        "agree on"),
+    "sim_verdict_agreement_previous": ("{:.3f}", "the same for the previous executor"),
     "import_dense_s_median": ("{:.1f} s", "`skt import-support` / `import-object` of a ≥ 250k-"
                                           "face mesh (the mesh zoo's dense cases, "
                                           "`tools/mesh_zoo.py`), process start included"),
     "import_dense_s": ("{}", "each of those imports (s)"),
 }
 BENCH_SAMPLE = ("machine", "rrt_bench_supports", "rrt_bench_skts", "rrt_bench_skts_reference",
-                "rrt_bench_skts_per_support", "sim_bench_trials",
-                "sim_verdict_disagreements", "import_dense_failed")
+                "rrt_bench_skts_per_support", "sim_bench_trials", "sim_bench_executor",
+                "sim_bench_failures_reference", "sim_verdict_disagreements",
+                "sim_verdict_disagreements_previous", "import_dense_failed", "parts_commit")
 
 PAPER_SKTS = 472 * 50  # the paper preset of docs/presets.md: supports × SKTs per support
 

@@ -30,11 +30,18 @@ approach axis → perturb (the object at ``linear_damping``/``angular_damping``:
 default 0.04 in the committed params, as the anchors') → settle (at the ``settle_*`` damping:
 an undamped hung object keeps swinging) → predicate.
 
-A released object that lies on the floor wholly below the supporting item has fallen for
-good (:class:`_Fallen`): the trial ends there with the predicate's ``touches_floor`` instead
-of running the rest of the perturbation. ``TrialSettings.reference`` runs the reference
-executor instead — numpy IK, the Panda's visual meshes loaded, every perturbation step — which
-``make bench`` times against this one on the same trials, verdict by verdict.
+Three executors (``TrialSettings.executor``, :data:`EXECUTORS`) decide the same way and differ
+in the physics steps they skip where the verdict is already certain; ``make bench`` times
+them against each other on the same trials, verdict by verdict:
+
+- ``reference``: numpy IK, the Panda's visual meshes loaded, every physics step;
+- ``fallen_exit``: the compiled IK, no visual meshes, and a released object that lies on the
+  floor wholly below the supporting item has fallen for good (:class:`_Fallen`): the trial
+  ends there with the predicate's ``touches_floor`` instead of running the rest of the
+  perturbation;
+- ``rest_exit`` (the default): also ends the settle once the object, touching the support,
+  has kept within :data:`REST_EXIT_FRACTION` of the predicate's at-rest bounds over a whole
+  window (:class:`_AtRest`); the predicate then observes it for its own window as always.
 
 Outcomes (``failure_reason``, empty on success; :data:`REASONS`):
 
@@ -68,6 +75,10 @@ from skt_lib.sim.world import World
 REASONS = ("ik_failed", "collided_before_hang", "not_reached", "dropped", "not_at_rest",
            "on_wall_plate", "perched", "touches_robot")
 HANDS = ("panda", "floating")
+#: The executors, slowest first: ``reference`` (numpy IK, the Panda's visual meshes, every
+#: physics step), ``fallen_exit`` (compiled IK, no visual meshes; ends a trial once the object
+#: has fallen for good) and ``rest_exit`` (also ends the settle once the object is at rest).
+EXECUTORS = ("reference", "fallen_exit", "rest_exit")
 #: predicate reason → trial reason; "touches_floor"/"no_contact" depend on a support touch
 _HANG_REASON = {"perched": "perched", "touches_robot": "touches_robot",
                 "not_at_rest": "not_at_rest", "on_wall_plate": "on_wall_plate"}
@@ -96,9 +107,9 @@ class TrialSettings:
     retreat_m: float
     retreat_steps: int
     perturbation: Perturbation
-    #: the reference executor (``make bench`` measures against it): numpy IK, the Panda's
-    #: visual meshes, the full perturbation even where the verdict is certain (module docs)
-    reference: bool = False
+    #: which executor (:data:`EXECUTORS`; module docs): ``make bench`` times them against
+    #: each other on the same trials, verdict by verdict
+    executor: str = "rest_exit"
 
 
 @dataclass(frozen=True)
@@ -169,6 +180,9 @@ def run_trial(task: TrialTask) -> dict:
     s = task.settings
     if task.hand not in HANDS:
         raise ValueError(f"hand: expected one of {HANDS}, got {task.hand!r}")
+    if s.executor not in EXECUTORS:
+        raise ValueError(f"executor: expected one of {EXECUTORS}, got {s.executor!r}")
+    reference = s.executor == "reference"
     if not task.grasps:
         raise ValueError(f"{task.trial_id}: no grasp candidates")
     keypoint = np.asarray(task.keypoint, float).reshape(4, 4)
@@ -185,8 +199,8 @@ def run_trial(task: TrialTask) -> dict:
                          angular_damping=s.angular_damping)
         fixed = {"support": support, "wall": wall}
         if task.hand == "panda":
-            robot = Panda(world, pose_matrix(s.robot_base, [0, 0, 0, 1]), compiled=not s.reference,
-                          visual=s.reference)
+            robot = Panda(world, pose_matrix(s.robot_base, [0, 0, 0, 1]), compiled=not reference,
+                          visual=reference)
 
             def setup(p: np.ndarray) -> GraspChoice | GraspFailure:
                 return choose_grasp(world, robot, p, task.grasps, [support, wall], obj, s.ik_tol_m,
@@ -257,19 +271,23 @@ def run_trial(task: TrialTask) -> dict:
                 trace.step(1, "retreat")
                 row["touched_support"] |= bool(world.contacts(obj, support))
         phases = perturb_phases(s.perturbation)
-        fallen = None if s.reference else _Fallen(world, obj, support)
+        fallen = None if reference else _Fallen(world, obj, support)
         for i, (gravity, steps) in enumerate(phases):
-            if i == len(phases) - 1:  # the settle may damp (DESIGN §5); the perturbation does not
+            settle = i == len(phases) - 1
+            if settle:  # the settle may damp (DESIGN §5); the perturbation does not
                 pb.changeDynamics(obj, -1, linearDamping=s.settle_linear_damping,
                                   angularDamping=s.settle_angular_damping, physicsClientId=world.cid)
             world.set_gravity_support(gravity)
-            phase = "settle" if i == len(phases) - 1 else "perturb"
+            rest = (_AtRest(world, obj, support, s.perturbation)
+                    if settle and s.executor == "rest_exit" else None)
             chunk = steps if fallen is None else FALLEN_CHECK_STEPS
             for done in range(0, steps, chunk):
-                trace.step(min(chunk, steps - done), phase)
+                trace.step(min(chunk, steps - done), "settle" if settle else "perturb")
                 if fallen is not None and fallen():  # the predicate would say touches_floor
                     row["detail"] = "predicate: touches_floor"
                     return _end(row, "dropped" if row["touched_support"] else "not_reached", trace)
+                if rest is not None and rest():  # the rest of the settle would not move it
+                    break
             row["touched_support"] |= bool(world.contacts(obj, support))
         check = check_hang(world, obj, support, s.perturbation,
                            None if robot is None else robot.body)
@@ -305,20 +323,26 @@ def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, f
     that a grasp candidate follows."""
     s = task.settings
     inv = invert(keypoint)
-    paths = [path, *(executed_path(p, s.step_m, task.object_radius_m) for p in task.alternatives)]
+    paths = {0: path}  # executed paths, made when first needed: most trials need one
+
+    def path_of(k: int) -> np.ndarray:
+        if k not in paths:
+            paths[k] = executed_path(task.alternatives[k - 1], s.step_m, task.object_radius_m)
+        return paths[k]
+
     bodies = list(fixed.values())
     failures = {}
 
     def attempt(k: int):
         if task.alternatives:  # a sweep moved it; else it still stands where it was loaded
-            world.set_pose_support(obj, paths[k][0] @ inv)
+            world.set_pose_support(obj, path_of(k)[0] @ inv)
         if _blockers(world, {"object": obj}, fixed, start=True):
             return None
         if setup is None:
-            return k, paths[k], True
-        choice = setup(paths[k])
+            return k, path_of(k), True
+        choice = setup(path_of(k))
         if not isinstance(choice, GraspFailure):
-            return k, paths[k], choice
+            return k, path_of(k), choice
         failures[k] = choice
         return None
 
@@ -326,14 +350,14 @@ def _choose_skt(world: World, task: TrialTask, keypoint: np.ndarray, obj: int, f
     # sweep is known clear; the others are swept to their deepest only when none was taken
     penetrating = []
     sweep = task.alternatives and task.sweep_alternatives
-    for k in range(len(paths)):
-        if sweep and _sweep_depth(world, obj, inv, paths[k], bodies,
+    for k in range(1 + len(task.alternatives)):
+        if sweep and _sweep_depth(world, obj, inv, path_of(k), bodies,
                                   stop_above=SWEEP_TOL_M) > SWEEP_TOL_M:
             penetrating.append(k)
             continue
         if (out := attempt(k)) is not None:
             return out
-    depth = {k: _sweep_depth(world, obj, inv, paths[k], bodies) for k in penetrating}
+    depth = {k: _sweep_depth(world, obj, inv, path_of(k), bodies) for k in penetrating}
     for k in sorted(penetrating, key=lambda k: (depth[k], k)):
         if (out := attempt(k)) is not None:
             return out
@@ -376,6 +400,44 @@ class _Fallen:
         w = self.world
         top = pb.getAABB(self.obj, -1, physicsClientId=w.cid)[1][2]
         return top < self.bottom and w.floor is not None and bool(w.contacts(self.obj, w.floor))
+
+
+#: ``rest_exit`` ends the settle once the object, touching the support, has stayed within
+#: this fraction of the predicate's at-rest bounds (``rest_speed_m_s`` and
+#: ``rest_angular_speed_rad_s`` × its window) over a whole window.
+REST_EXIT_FRACTION = 0.25
+
+
+class _AtRest:
+    """Whether a released object has come to rest on the support during the settle: over the
+    last ``rest_window_steps`` (sampled every call, i.e. every :data:`FALLEN_CHECK_STEPS`)
+    its centre of mass stayed within :data:`REST_EXIT_FRACTION` of the predicate's distance
+    bound of where the window began, its orientation within that fraction of the angle
+    bound, and it touches the support. Under constant gravity and damping nothing else in
+    the world moves (the arm has retreated and holds still), so the rest of the settle would
+    leave it where it is; the predicate then observes it for its own window as always."""
+
+    def __init__(self, world: World, obj: int, support: int, p: Perturbation):
+        self.world, self.obj, self.support = world, obj, support
+        duration = p.rest_window_steps * world.dt
+        self.max_dist = REST_EXIT_FRACTION * p.rest_speed_m_s * duration
+        self.max_angle = REST_EXIT_FRACTION * p.rest_angular_speed_rad_s * duration
+        self.n = -(-p.rest_window_steps // FALLEN_CHECK_STEPS) + 1  # samples spanning a window
+        self.poses: list[tuple] = []
+
+    def __call__(self) -> bool:
+        cid = self.world.cid
+        self.poses.append(pb.getBasePositionAndOrientation(self.obj, physicsClientId=cid))
+        if len(self.poses) < self.n:
+            return False
+        window = self.poses[-self.n:]
+        p0, q0 = np.asarray(window[0][0]), np.asarray(window[0][1])
+        for p, q in window[1:]:
+            if np.linalg.norm(np.asarray(p) - p0) > self.max_dist:
+                return False
+            if 2.0 * np.arccos(min(1.0, abs(float(np.dot(q, q0))))) > self.max_angle:
+                return False
+        return bool(self.world.contacts(self.obj, self.support))
 
 
 def _attach(world: World, body: int, link: int, obj: int, max_force: float) -> int:

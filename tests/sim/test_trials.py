@@ -9,7 +9,7 @@ import pytest
 
 from skt_lib.geometry.se3 import invert
 from skt_lib.sim import execute
-from skt_lib.sim.execute import REASONS, run_trial
+from skt_lib.sim.execute import EXECUTORS, REASONS, run_trial
 from skt_lib.sim.world import World
 from tests.sim import scenes
 
@@ -128,22 +128,43 @@ def test_unknown_hand_is_an_error(scene):
         execute.run_trial(task)
 
 
-def test_the_fast_executor_gives_the_reference_executors_rows(scene):
-    """The compiled IK, the Panda without visual meshes and the early end of a fallen
-    object's perturbation change how long a trial takes, not what it decides: the same row
-    (to rounding in the tracking error) on a success, a collision, a fall and the floating
-    hand; and on the fall the fast executor does stop early."""
+def test_the_fast_executors_give_the_reference_executors_rows(scene):
+    """The compiled IK, the Panda without visual meshes, the early end of a fallen object's
+    perturbation and of an object's settle once at rest change how long a trial takes, not
+    what it decides: the same row (to rounding in the tracking error) on a success, a
+    collision, a fall and the floating hand; on the fall both fast executors stop early, on
+    a success ``rest_exit`` ends the settle early and ``fallen_exit`` does not."""
     cases = [(scenes.straight_skt(), "panda"), (scenes.straight_skt(offset=(0.0, 0.0, -0.009)), "panda"),
              (scenes.straight_skt(offset=(0.0, 0.12, 0.0)), "panda"),
              (scenes.straight_skt(offset=(0.0, 0.12, 0.0)), "floating")]
+    outcomes = set()
     for positions, hand in cases:
-        fast = dataclasses.replace(scenes.ring_task(*scene, positions, hand), record_every=24)
-        ref = dataclasses.replace(fast, settings=dataclasses.replace(fast.settings, reference=True))
-        a, b = run_trial(ref), run_trial(fast)
-        err_a, err_b = a["row"].pop("max_track_err_m"), b["row"].pop("max_track_err_m")
-        assert a["row"] == b["row"] and err_b == pytest.approx(err_a, abs=1e-9)
-        fell = a["row"]["detail"] == "predicate: touches_floor"
-        assert (len(b["trace"]) < len(a["trace"]) - 40) if fell else (len(b["trace"]) == len(a["trace"]))
+        task = dataclasses.replace(scenes.ring_task(*scene, positions, hand), record_every=24)
+        runs = {ex: run_trial(dataclasses.replace(
+                    task, settings=dataclasses.replace(task.settings, executor=ex)))
+                for ex in EXECUTORS}
+        errs = {ex: r["row"].pop("max_track_err_m") for ex, r in runs.items()}
+        ref, fallen, rest = (runs[ex] for ex in EXECUTORS)
+        assert ref["row"] == fallen["row"] == rest["row"]
+        assert errs["fallen_exit"] == pytest.approx(errs["reference"], abs=1e-9)
+        assert errs["rest_exit"] == errs["fallen_exit"]
+        fell = ref["row"]["detail"] == "predicate: touches_floor"
+        n = {ex: len(r["trace"]) for ex, r in runs.items()}
+        if fell:
+            assert n["fallen_exit"] == n["rest_exit"] < n["reference"] - 40
+        else:
+            assert n["fallen_exit"] == n["reference"]
+        if ref["row"]["success"]:
+            assert n["rest_exit"] < n["fallen_exit"] - 5  # the settle ended ≥ 120 steps early
+        outcomes.add("success" if ref["row"]["success"] else ref["row"]["failure_reason"])
+    assert {"success", "collided_before_hang"} <= outcomes
+
+
+def test_an_unknown_executor_is_refused(scene):
+    task = scenes.ring_task(*scene, scenes.straight_skt(), "panda")
+    with pytest.raises(ValueError, match="executor: expected one of"):
+        run_trial(dataclasses.replace(task, settings=dataclasses.replace(task.settings,
+                                                                         executor="fast")))
 
 
 def test_set_up_falls_back_to_an_alternative_skt(scene):
