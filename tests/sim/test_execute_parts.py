@@ -1,0 +1,260 @@
+"""The executor's parts (:mod:`skt_lib.sim.execute`) one at a time, on boxes written as URDFs
+in tmp_path: the floating hand's anchor, the keypoint probe, the blockers a trial names, the
+grasp constraint, the fallen and at-rest checks that end a trial early, and the set-up's
+sweep. Each runs in a world that is not PyBullet's client 0, as a trial does beside another
+world (a planner's): a call that forgets ``physicsClientId`` fails here."""
+
+from pathlib import Path
+
+import numpy as np
+import pybullet as pb
+import pytest
+from scipy.spatial.transform import Rotation
+
+from skt_lib.geometry.se3 import invert, pose_matrix
+from skt_lib.sim import execute
+from skt_lib.sim.hanging import Perturbation
+from skt_lib.sim.world import World
+from tests.sim import scenes
+
+DT = 1.0 / 256  # a power of two: the at-rest bounds below are exact in floats
+WINDOW = 128  # at-rest window: 0.5 s
+PERT = Perturbation(accel_m_s2=4.0, steps_per_direction=10, settle_steps=10, rest_speed_m_s=0.02,
+                    rest_angular_speed_rad_s=0.15, rest_window_steps=WINDOW)
+
+
+def box_urdf(directory: Path, name: str, size, mass: float, com=(0.0, 0.0, 0.0)) -> str:
+    """A one-link box (metres, kg) with its centre of mass at ``com`` (link frame)."""
+    path = Path(directory) / f"{name}.urdf"
+    path.write_text(f"""<?xml version="1.0"?>
+<robot name="{name}"><link name="base">
+<inertial><origin xyz="{com[0]} {com[1]} {com[2]}"/><mass value="{mass}"/>
+<inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial>
+<collision><geometry><box size="{size[0]} {size[1]} {size[2]}"/></geometry></collision>
+</link></robot>""")
+    return str(path)
+
+
+def arm_urdf(directory: Path) -> str:
+    """A fixed base with one child link on a fixed joint, offset and turned, its centre of
+    mass off its link frame: link 0's centre-of-mass frame is nowhere near the base's."""
+    path = Path(directory) / "arm.urdf"
+    path.write_text("""<?xml version="1.0"?>
+<robot name="arm"><link name="base">
+<inertial><mass value="0"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>
+<collision><geometry><box size="0.02 0.02 0.02"/></geometry></collision></link>
+<link name="tip"><inertial><origin xyz="0.01 0.02 -0.015" rpy="0.3 0 0"/><mass value="0.5"/>
+<inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial>
+<collision><geometry><box size="0.01 0.01 0.01"/></geometry></collision></link>
+<joint name="j" type="fixed"><parent link="base"/><child link="tip"/>
+<origin xyz="0.05 -0.03 0.02" rpy="0.4 -0.2 0.9"/></joint>
+</robot>""")
+    return str(path)
+
+
+def at(x=0.0, y=0.0, z=0.0, rotvec=(0.0, 0.0, 0.0)) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    t[:3, 3] = x, y, z
+    return t
+
+
+@pytest.fixture
+def world():
+    with World(DT, 50) as decoy, World(DT, 50) as w:
+        assert w.cid != 0 and decoy.cid != w.cid
+        yield w
+
+
+def test_anchor_is_a_static_shapeless_body_where_it_is_put(world):
+    n = pb.getNumBodies(physicsClientId=world.cid)
+    t = at(0.1, -0.2, 0.9, rotvec=(0.3, -0.5, 1.1))
+    anchor = execute._Anchor(world, t)
+    assert pb.getNumBodies(physicsClientId=world.cid) == n + 1
+
+    def pose():
+        pos, quat = pb.getBasePositionAndOrientation(anchor.body, physicsClientId=world.cid)
+        return pose_matrix(pos, quat)
+
+    np.testing.assert_allclose(pose(), t, atol=1e-12)
+    assert pb.getCollisionShapeData(anchor.body, -1, physicsClientId=world.cid) == ()
+    assert pb.getDynamicsInfo(anchor.body, -1, physicsClientId=world.cid)[0] == 0.0  # massless
+    world.step(30)  # gravity does not move it
+    np.testing.assert_allclose(pose(), t, atol=1e-12)
+    t2 = at(-0.3, 0.1, 1.2, rotvec=(-1.0, 0.2, 0.0))
+    anchor.move(t2)
+    np.testing.assert_allclose(pose(), t2, atol=1e-12)
+    anchor.remove()
+    assert pb.getNumBodies(physicsClientId=world.cid) == n
+
+
+def test_keypoint_probe_measures_the_keypoint_not_the_centre_of_mass(world, tmp_path):
+    obj = world.load(box_urdf(tmp_path, "obj", (0.04, 0.02, 0.03), 0.2, com=(0.01, -0.02, 0.005)),
+                     at(0.2, 0.05, -0.1, rotvec=(0.4, 0.9, -0.3)), fixed=False, friction=0.5)
+    keypoint = at(0.03, 0.0, -0.01, rotvec=(0.0, 0.0, 1.2))  # object frame
+    probe = execute._KeypointProbe(world, obj, keypoint)
+    xi = world.pose_support(obj) @ keypoint  # where the keypoint is, support frame
+    assert probe.error(xi) < 1e-12
+    off = xi.copy()
+    off[:3, 3] += [0.003, -0.004, 0.012]
+    assert probe.error(off) == pytest.approx(0.013, abs=1e-12)
+    turned = xi @ at(rotvec=(0.0, 2.0, 0.0))  # the keypoint's position alone counts
+    assert probe.error(turned) < 1e-12
+
+
+def test_blockers_name_each_mover_obstacle_pair_in_order(world, tmp_path):
+    wall = world.add_wall()
+    support = world.load(box_urdf(tmp_path, "support", (0.02, 0.1, 0.1), 0.0), at(0.1),
+                         fixed=True, friction=0.5)
+    cube = box_urdf(tmp_path, "cube", (0.02, 0.02, 0.02), 0.1)
+    obj = world.load(cube, at(0.005, 0.2), fixed=False, friction=0.5)  # 5 mm into the wall
+    robot = world.load(cube, at(0.085), fixed=False, friction=0.5)  # 5 mm into the support
+    movers, fixed = {"object": obj, "robot": robot}, {"support": support, "wall": wall}
+    assert execute._blockers(world, movers, fixed, start=True) == "object-wall,robot-support"
+    swapped = {"robot": robot, "object": obj}, {"wall": wall, "support": support}
+    assert execute._blockers(world, *swapped, start=True) == "robot-support,object-wall"
+    world.set_gravity_support((0.0, 0.0, 0.0))
+    world.step(1)  # contacts exist only once stepped
+    assert execute._blockers(world, movers, fixed) == "object-wall,robot-support"
+    world.set_pose_support(obj, at(0.2, 0.2))  # 9 cm clear of both
+    assert execute._blockers(world, movers, fixed, start=True) == "robot-support"
+    world.set_pose_support(robot, at(0.2, -0.2))
+    world.step(1)
+    assert execute._blockers(world, movers, fixed) == ""
+    assert execute._blockers(world, movers, fixed, start=True) == ""
+
+
+@pytest.mark.parametrize("link", [-1, 0])
+def test_attach_holds_the_object_where_it_is_up_to_the_force_limit(world, tmp_path, link):
+    """The constraint keeps the object's pose relative to the link (centre-of-mass frames
+    on both sides, neither at its link frame) against gravity; the force limit lets it go
+    when set below its weight."""
+    holder = (world.load(arm_urdf(tmp_path), at(0.2), fixed=True, friction=0.5) if link == 0
+              else execute._Anchor(world, world.to_world(at(0.2, rotvec=(0.2, 0.1, 0.0)))).body)
+    heavy = box_urdf(tmp_path, "heavy", (0.03, 0.02, 0.01), 0.5, com=(0.01, 0.0, -0.005))
+    start = at(0.25, -0.02, -0.05, rotvec=(0.3, -0.2, 0.6))
+
+    def carry(max_force: float) -> float:
+        obj = world.load(heavy, start, fixed=False, friction=0.5)
+        cid = execute._attach(world, holder, link, obj, max_force)
+        assert pb.getConstraintInfo(cid, physicsClientId=world.cid)[10] == max_force
+        world.step(120)
+        moved = np.linalg.norm(world.pose_support(obj)[:3, 3] - start[:3, 3])
+        pb.removeConstraint(cid, physicsClientId=world.cid)
+        pb.removeBody(obj, physicsClientId=world.cid)
+        return moved
+
+    assert carry(100.0) < 2e-4  # 0.5 kg held still (not snapped to another pose)
+    assert carry(0.5) > 0.01  # 0.5 N cannot hold 4.9 N: it falls
+
+
+def test_fallen_is_below_the_support_and_on_the_floor(tmp_path):
+    """On the floor with its top below the support's bottom: fallen. Not fallen: its top
+    above that bottom (though on the floor), or below it but off the floor, or no floor."""
+    with World(DT, 50) as decoy, World(DT, 50) as world, World(DT, 50, with_floor=False) as bare:
+        assert 0 not in (world.cid, bare.cid) and decoy.cid != world.cid
+        support_z = -0.89  # support frame: the support's box spans world z 0.05 … 0.07
+        cases = {}
+        for name, w in (("floor", world), ("bare", bare)):
+            w.set_gravity_support((0.0, 0.0, 0.0))
+            support = w.load(box_urdf(tmp_path, "support", (0.02, 0.1, 0.02), 0.0),
+                             at(0.1, 0.0, support_z), fixed=True, friction=0.5)
+            low = w.load(box_urdf(tmp_path, "low", (0.02, 0.02, 0.049), 0.1),
+                         at(0.2, 0.0, -0.95 + 0.0245), fixed=False, friction=0.5)
+            tall = w.load(box_urdf(tmp_path, "tall", (0.02, 0.02, 0.051), 0.1),
+                          at(0.2, 0.1, -0.95 + 0.0255), fixed=False, friction=0.5)
+            floating = w.load(box_urdf(tmp_path, "floating", (0.02, 0.02, 0.02), 0.1),
+                              at(0.2, -0.1, -0.95 + 0.02), fixed=False, friction=0.5)  # 1 cm up
+            w.step(1)
+            cases[name] = {k: execute._Fallen(w, body, support)()
+                           for k, body in (("low", low), ("tall", tall), ("floating", floating))}
+        assert cases["floor"] == {"low": True, "tall": False, "floating": False}
+        assert cases["bare"] == {"low": False, "tall": False, "floating": False}
+
+
+def test_at_rest_over_a_whole_window_within_a_quarter_of_the_bounds(world, tmp_path):
+    """Sampled once per call: at rest once the last ⌈128/24⌉ + 1 = 7 samples all lie within
+    a quarter of the predicate's bounds of the window's first (0.25 × 0.02 m/s × 0.5 s =
+    2.5 mm; 0.25 × 0.15 rad/s × 0.5 s = 0.01875 rad; inclusive) and it touches the support."""
+    support = world.load(box_urdf(tmp_path, "support", (0.04, 0.1, 0.02), 0.0), at(0.05),
+                         fixed=True, friction=0.8)
+    obj = world.load(box_urdf(tmp_path, "obj", (0.02, 0.02, 0.02), 0.1), at(0.05, 0.0, 0.0201),
+                     fixed=False, friction=0.8)
+    world.step(200)  # resting on the support's top
+    assert world.contacts(obj, support)
+    x0, _, z0 = pb.getBasePositionAndOrientation(obj, physicsClientId=world.cid)[0]
+    dist, angle = 0.25 * 0.02 * 0.5, 0.25 * 0.15 * 0.5
+
+    def run(samples) -> list[bool]:
+        """Each sample (y offset m, turn about z rad) placed exactly, then one call; no step,
+        so the contacts stay those of the resting object."""
+        rest = execute._AtRest(world, obj, support, PERT)
+        out = []
+        for dy, turn in samples:
+            quat = [0.0, 0.0, np.sin(turn / 2), np.cos(turn / 2)]
+            pb.resetBasePositionAndOrientation(obj, [x0, dy, z0], quat, physicsClientId=world.cid)
+            out.append(rest())
+        return out
+
+    still = [(0.0, 0.0)] * 8
+    assert run(still) == [False] * 6 + [True, True]
+    assert run([(0.0, 0.0), (dist / 2, 0.0)] + [(dist, 0.0)] * 5) == [False] * 6 + [True]
+    assert run([(0.0, 0.0)] * 6 + [(dist * 1.01, 0.0)]) == [False] * 7
+    assert run([(0.0, 0.0), (2 * dist, 0.0)] + [(0.0, 0.0)] * 5) == [False] * 7  # a jump back
+    # the window slides: a first sample off, then a whole window still
+    assert run([(2 * dist, 0.0)] + [(0.0, 0.0)] * 7) == [False] * 7 + [True]
+    assert run([(0.0, 0.0)] + [(0.0, 0.8 * angle)] * 6) == [False] * 6 + [True]
+    assert run([(0.0, 0.0)] * 6 + [(0.0, 1.2 * angle)]) == [False] * 7
+    assert run([(0.0, 2 * angle)] + [(0.0, 0.0)] * 7) == [False] * 7 + [True]
+    world.set_pose_support(obj, at(0.05, 0.0, 0.05))  # lifted off, stepped without gravity
+    world.set_gravity_support((0.0, 0.0, 0.0))
+    world.step(1)
+    z0 = pb.getBasePositionAndOrientation(obj, physicsClientId=world.cid)[0][2]
+    assert run(still) == [False] * 8  # still, but not on the support
+
+
+def test_sweep_depth_looks_at_every_second_pose_and_the_last(world, tmp_path):
+    """A 1 cm cube slid along x into a slab (x 4 … 6 cm): depth = 6.5 cm − x. The sweep sees
+    poses 0, 2, 4, … and the last, not the odd ones between; with ``stop_above`` it stops at
+    the first pose strictly deeper."""
+    slab = world.load(box_urdf(tmp_path, "slab", (0.02, 0.1, 0.1), 0.0), at(0.05), fixed=True,
+                      friction=0.5)
+    obj = world.load(box_urdf(tmp_path, "cube", (0.01, 0.01, 0.01), 0.1), at(0.2), fixed=False,
+                     friction=0.5)
+    keypoint = at(0.0, 0.0, 0.004, rotvec=(0.0, 0.0, np.pi / 2))  # turned about z: same extents
+
+    def path(depths_mm) -> np.ndarray:
+        return np.stack([at(0.065 - d / 1000, 0.0, 0.004, rotvec=(0.0, 0.0, np.pi / 2))
+                         for d in depths_mm])
+
+    def sweep(depths_mm, **kw) -> float:
+        depth = execute._sweep_depth(world, obj, invert(keypoint), path(depths_mm), [slab], **kw)
+        return 1000 * depth
+
+    assert execute.SWEEP_EVERY == 2
+    assert sweep([-5, -5, -5, -5, 4, 6, -5, 3]) == pytest.approx(4, abs=1e-6)  # 5 is odd: unseen
+    assert sweep([-5, -5, 1, 5, -5, -5, -5, 3]) == pytest.approx(3, abs=1e-6)  # the last one
+    assert sweep([-5, -5, -5, -5, -5]) == 0.0  # clear: nothing negative comes out
+    assert sweep([-5, -5, 2, -5, 5]) == pytest.approx(5, abs=1e-6)
+    assert sweep([-5, -5, 2, -5, 5], stop_above=0.001) == pytest.approx(2, abs=1e-6)
+    at_two = sweep([2]) / 1000
+    assert sweep([-5, -5, 2, -5, 5], stop_above=at_two) == pytest.approx(5, abs=1e-6)
+    assert sweep([-5, -5, 2, -5, 5], stop_above=0.006) == pytest.approx(5, abs=1e-6)
+
+
+def test_a_trial_beside_another_world_decides_as_one_alone(tmp_path):
+    """The same rows whether the trial's world is PyBullet's client 0 or another world is
+    open (client 0): a success, a release in the air (ended early as fallen) and a path into
+    the peg, with either hand."""
+    support, (ring, vertices) = scenes.write_support(tmp_path), scenes.build_ring(tmp_path)
+    cases = [(scenes.straight_skt(), "panda", ""),
+             (scenes.straight_skt(offset=(0.0, 0.12, 0.0)), "floating", "not_reached"),
+             (scenes.straight_skt(offset=(0.0, 0.0, -0.009)), "panda", "collided_before_hang")]
+    for positions, hand, reason in cases:
+        task = scenes.ring_task(support, ring, vertices, positions, hand)
+        alone = execute.run_trial(task)
+        with World(DT, 50) as other:
+            assert other.cid == 0  # nothing else open: the trial below gets another client
+            beside = execute.run_trial(task)
+        assert beside["row"] == alone["row"] and beside["skt"] == alone["skt"] == 0
+        assert alone["row"]["failure_reason"] == reason, alone["row"]
