@@ -32,6 +32,11 @@ def test_cross3_is_numpys_cross_bit_for_bit():
         assert np.array_equal(cross3(x, y), np.cross(x, y))
     assert np.array_equal(cross3(a[0], (0.0, 0.0, 1.0)), np.cross(a[0], [0.0, 0.0, 1.0]))
     assert np.array_equal(cross3(-np.zeros(3), np.ones(3)), np.cross(-np.zeros(3), np.ones(3)))
+    assert np.array_equal(cross3((0.0, 0.0, 1.0), a[0]), np.cross([0.0, 0.0, 1.0], a[0]))
+    # float32 vectors are multiplied in float64 (as plain floats), not rounded to float32
+    x, y = a[:2].astype(np.float32)
+    for u, v in ((x, y), (x, y.astype(np.float64)), (x.astype(np.float64), y)):
+        assert np.array_equal(cross3(u, v), np.cross(np.float64(u), np.float64(v)))
 
 
 def test_rotvec_matrix_is_scipys_bit_for_bit_across_the_taylor_switch():
@@ -43,6 +48,9 @@ def test_rotvec_matrix_is_scipys_bit_for_bit_across_the_taylor_switch():
             n += 1
     assert np.array_equal(rotvec_matrix(0.0, 0.0, 0.0), np.eye(3))
     assert n == 21000
+    # exactly at the switch (scipy's series, ``angle <= 1e-3``; its sine differs in the last bit)
+    for v in ((1e-3, 0.0, 0.0), (0.0, -1e-3, 0.0), (6e-4, 0.0, 8e-4)):
+        assert np.array_equal(rotvec_matrix(*v), Rotation.from_rotvec(v).as_matrix()), v
 
 
 def test_minimal_rotation_is_the_naive_one_bit_for_bit():
@@ -58,6 +66,17 @@ def test_minimal_rotation_is_the_naive_one_bit_for_bit():
             side /= np.linalg.norm(side)
             assert np.array_equal(minimal_rotation(x, y, side),
                                   minimal_rotation_naive(x, y, side)), label
+
+
+@pytest.mark.parametrize("fn", [minimal_rotation, minimal_rotation_naive])
+def test_minimal_rotation_turns_by_1e12_rad_not_the_identity(fn):
+    """|a × b| = 1e-12 exactly (the threshold, which is exclusive): still the 1e-12 rad turn
+    about z that takes a onto b, not the identity."""
+    a, b = np.array([1.0, 0.0, 0.0]), np.array([1.0, 1e-12, 0.0])  # |b| rounds to 1
+    assert np.linalg.norm(np.cross(a, b)) == 1e-12
+    r = fn(a, b, np.array([0.0, 1.0, 0.0]))
+    assert np.array_equal(r, Rotation.from_rotvec([0.0, 0.0, 1e-12]).as_matrix())
+    assert r[1, 0] == 1e-12 and np.array_equal(r @ a, b)
 
 
 def _limit_direction_naive(d, prev, max_turn):

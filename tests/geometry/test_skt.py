@@ -8,8 +8,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from skt_lib.geometry.skt import (
-    TURN_RADIUS_M, executed_path, interpolate, keypoint_positions, max_point_step, resample,
-    rule_frames, skt_frames, skt_frames_naive, turning_length,
+    _EPS_LEN, _EPS_VERTICAL, TURN_RADIUS_M, arc_length, executed_path, interpolate,
+    keypoint_positions, max_point_step, motion_directions, resample, rule_frames, skt_frames,
+    skt_frames_naive, turning_length,
 )
 
 # x = motion direction, y = x × (0, 0, −1), z = x × y — evaluated by hand:
@@ -260,3 +261,98 @@ def test_max_point_step_by_hand():
     # 0→1: both move 3 mm; 1→2: (0.013, 0, 0) → (0, 0.01, 0): sqrt(0.013² + 0.01²)
     assert max_point_step(poses, pts) == pytest.approx(np.hypot(0.013, 0.01))
     assert max_point_step(poses[:2], pts) == pytest.approx(0.003)
+
+
+def test_arc_length_by_hand():
+    pos = np.array([[0.0, 0, 0], [0.75, 1.0, 0], [0.75, 1.0, 0.5], [0.75, 1.0, 0.5]])
+    assert np.array_equal(arc_length(pos), [0.0, 1.25, 1.75, 1.75])
+
+
+@pytest.mark.parametrize("frames_fn", [skt_frames, skt_frames_naive])
+def test_both_frame_functions_by_hand_through_two_vertical_segments_and_a_reversal(frames_fn):
+    """The reference is held to the same frames as the fast version: anchored two waypoints
+    out (the first two arrivals are vertical), and over a full reversal the half turn about y
+    (y kept, x and z turned over)."""
+    pos = np.zeros((5, 3))
+    pos[1] = pos[0] + [0, 0, 0.02]            # down
+    pos[2] = pos[1] + [0, 0, 0.03]            # down
+    pos[3] = pos[2] + [0.03, 0, 0.04]         # R_TILT_DOWN: the anchor
+    pos[4] = pos[3] + [0.05, 0, 0]            # −x
+    _check(frames_fn(pos), pos, [R_DOWN, R_DOWN, R_TILT_DOWN, R_MINUS_X, R_MINUS_X])
+    back = np.array([[0.0, 0, 0], [0.02, 0, 0], [0.0, 0, 0]])  # −x into the hang, +x before
+    over = np.diag([1.0, -1.0, -1.0])
+    _check(frames_fn(back), back, [R_MINUS_X, over, over])
+
+
+@pytest.mark.parametrize("frames_fn", [skt_frames, skt_frames_naive])
+def test_the_anchor_frame_is_the_rule_frame_bit_for_bit(frames_fn):
+    """Transport starts from the rule's frame at the anchor and never comes back to it: the
+    anchor's rotation is the rule's exactly (an anchor recomputed by transporting there and
+    back would differ by rounding)."""
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        p = np.cumsum(rng.normal(size=(6, 3)) * 0.01, axis=0)
+        down = p.copy()
+        down[0] = p[1] - [0, 0, 0.01]  # arriving straight down: anchored at ξ_1
+        for anchor, pos in ((0, p), (1, down)):
+            np.testing.assert_array_equal(frames_fn(pos)[anchor], rule_frames(pos)[anchor])
+
+
+def test_thresholds_are_inclusive_where_documented():
+    """A segment of exactly ``_EPS_LEN`` has a direction; a motion whose horizontal share is
+    exactly ``_EPS_VERTICAL`` has a rule frame."""
+    pos = np.array([[0.0, 0, 0], [0.0, _EPS_LEN, 0], [0.01, _EPS_LEN, 0]])
+    assert np.array_equal(motion_directions(pos), [[0.0, -1, 0], [-1.0, 0, 0], [-1.0, 0, 0]])
+    h = 1.0000000000005e-06  # (−h, 0, −1) normalised: horizontal share exactly 1e-6
+    pos = np.array([[0.0, 0, 0], [h, 0, 1.0], [h + 0.01, 0, 1.0]])
+    x = motion_directions(pos)[0]
+    assert np.linalg.norm(np.cross(x, [0.0, 0, -1])[None], axis=1)[0] == _EPS_VERTICAL
+    r = rule_frames(pos)[0, :3, :3]  # the rule's frame of that motion: y = (0, −1, 0)
+    assert np.array_equal(r[:, 0], x) and np.array_equal(r[:, 1], [0.0, -1, 0])
+    assert np.array_equal(r[:, 2], np.cross(x, [0.0, -1, 0]))
+
+
+def test_undefined_and_underflowing_rule_frames_warn_nothing():
+    """Vertical motion (0/0) and a horizontal share whose square underflows (x/0) give NaN
+    rule frames silently, as documented, not numpy RuntimeWarnings."""
+    import warnings
+
+    vertical = np.array([[0.0, 0, 0], [0, 0, 0.02], [0.03, 0, 0.06]])
+    tiny = np.array([[0.0, 0, 0], [1e-172, 0, 0.01], [0.03, 0, 0.05]])  # share 1e-170: y_norm 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for pos in (vertical, tiny):
+            r = rule_frames(pos)
+            assert np.isnan(r[0, :3, 1:3]).all() and np.isfinite(r[1]).all()
+            assert np.isfinite(skt_frames(pos)).all()
+
+
+def test_turning_length_where_unit_directions_dot_past_one():
+    """Along a direction whose normalised square rounds to 1 + 2⁻⁵², a straight path turns by
+    0 and a reversal by π — never NaN."""
+    v = np.array([0.90347018, 0.0940123, -0.74349925])
+    t = motion_directions(np.array([v, [0.0, 0, 0]]))[0]
+    assert t @ t > 1.0  # the case at hand
+    line = np.array([[0.0, 0, 0], v, 2 * v])
+    assert np.array_equal(turning_length(line), arc_length(line))
+    back = np.array([[0.0, 0, 0], v, [0.0, 0, 0]])
+    n = np.linalg.norm(v)
+    assert turning_length(back) == pytest.approx([0.0, n + TURN_RADIUS_M * np.pi / 2,
+                                                  2 * n + TURN_RADIUS_M * np.pi], rel=1e-14)
+
+
+def test_zero_length_frames_message():
+    with pytest.raises(ValueError, match=r"^positions: zero-length trajectory; SKT frames are "
+                                         r"undefined$"):
+        skt_frames(np.zeros((3, 3)))
+
+
+def test_interpolate_widens_float32_frames_first():
+    """A float32 1e-8 offset vanishes in a float32 difference (1 − 1e-8 rounds to 1): the
+    pose count is the float64 one, 4 steps of just under 0.25, not 5."""
+    a, b = np.eye(4, dtype=np.float32), np.eye(4, dtype=np.float32)
+    a[0, 3], b[0, 3] = 1e-8, 1.0
+    frames = np.stack([a, b])
+    out = interpolate(frames, 0.2499999999, 0.0)
+    assert len(out) == 5 and out.dtype == np.float64
+    assert np.array_equal(out, interpolate(frames.astype(np.float64), 0.2499999999, 0.0))
