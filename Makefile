@@ -82,7 +82,7 @@ review: $(STAMP)
 mutation: $(STAMP)
 	@# mutmut on the modules the tests must guard, one at a time, each with its fast unit
 	@# tests; summary in reports/tests/mutation.{json,md}. Minutes per module; not in .ci/run.
-	@# One module: make mutation MODULES=skt_lib/planning/trajectory.py
+	@# One module: make mutation MODULES=skt_lib/geometry/skt.py
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python tools/mutation.py $(MODULES)
 
 seeds: $(STAMP)

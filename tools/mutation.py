@@ -3,16 +3,24 @@
 For each module, a scratch copy of the repository under ``.mutation/<name>/`` gets a
 ``[tool.mutmut]`` section that mutates only that module and runs only its fast unit tests
 (listed below); ``mutmut run`` executes there, so the working tree is never touched. The
-summary is merged per module into ``reports/tests/mutation.json``::
+summary is merged per module into ``reports/tests/mutation.json``, replacing that module's
+entry; entries of modules no longer in the repository are dropped::
 
-    {module: {"killed", "survived", "timeout", "score", "equivalent", "no_tests",
+    {module: {"killed", "survived", "timeout", "score", "equivalent", "no_tests", "other",
               "seconds", "tests"}}
 
 ``score = killed / (killed + survived)``, where ``survived`` includes mutants no selected
 test executes (``no_tests``, also reported apart) and excludes the mutants judged
 equivalent (``EQUIVALENT`` below; listed with the reason in ``reports/tests/mutation.md``).
-``timeout`` mutants count as neither (mutmut reports them apart). Not part of ``.ci/run``:
-minutes per module.
+``timeout`` mutants count as neither (mutmut reports them apart), nor do ``other`` ones
+(per mutmut status, e.g. ``segfault``: the mutant crashed the test process). Not part of
+``.ci/run``: minutes per module.
+
+mutmut sends each mutant only to the tests that called the mutated function during its
+own first run of the selected tests, in the pytest process (through the trampoline it
+puts around every function): a test whose calls happen in a worker process (a stage's
+pool, an isolated child) does not count, and a module none of whose selected tests call it
+in-process gets no score. So a module's tests here call it directly.
 
     python tools/mutation.py                      # every module
     python tools/mutation.py skt_lib/geometry/skt.py --max-children 2
@@ -35,11 +43,11 @@ OUT = ROOT / "reports" / "tests"
 #: module → the fast unit tests that run against its mutants (pytest node ids or files)
 MODULES: dict[str, list[str]] = {
     "skt_lib/sim/hanging.py": ["tests/sim/test_hanging.py"],
-    "skt_lib/sim/execute.py": ["tests/sim/test_execute.py"],
+    "skt_lib/sim/execute.py": ["tests/sim/test_trials.py", "tests/sim/test_execute_parts.py"],
     "skt_lib/planning/collision.py": ["tests/planning/test_collision.py",
                                       "tests/planning/test_planning.py"],
-    "skt_lib/geometry/skt.py": ["tests/planning/test_trajectory.py",
-                                       "tests/planning/test_planning.py"],
+    "skt_lib/geometry/skt.py": ["tests/geometry/test_skt.py",
+                                "tests/geometry/test_fast_kernels.py"],
     "skt_lib/learning/pointnet2.py": ["tests/learning/test_pointnet2.py"],
 }
 
@@ -55,15 +63,20 @@ EQUIVALENT: dict[str, str] = {
         "skt_frames, which converts to float64 itself (a float32 input is tested there).",
     "skt_lib.geometry.skt.x_executed_path__mutmut_11":
         "np.asarray(positions, float) → np.asarray(positions): as mutant 9.",
-    **{f"skt_lib.geometry.skt.x_skt_frames__mutmut_{i}":
-       "np.errstate argument dropped/None: only whether numpy warns on 0/0 for a zero or "
-       "vertical segment changes; those rows are masked out by `known` either way."
-       for i in (15, 16, 17, 18)},
-    "skt_lib.geometry.skt.x_skt_frames__mutmut_47":
-        "norm >= 1e-12 → > 1e-12: differs only for a segment of length exactly 1e-12 m.",
-    "skt_lib.geometry.skt.x_skt_frames__mutmut_50":
-        "y_norm >= 1e-6 → > 1e-6: differs only at exactly 1e-6 horizontal share (as the "
-        "scalar skt_rotation's threshold).",
+    **{f"skt_lib.geometry.skt.x__anchor__mutmut_{i}":
+       "which entry of the rule rotation is tested for NaN ([0, 1] → [1, 1] or [0, 2]): "
+       "rule_frames sets the whole y column to NaN where the rule is undefined and leaves it "
+       "finite elsewhere (x is a finite unit vector), and z = x × y is NaN exactly where y is, "
+       "so every y and z entry is NaN on the same rows."
+       for i in (6, 7)},
+    "skt_lib.geometry.skt.x_skt_frames_naive__mutmut_36":
+        "prev = i − 1 if i > k → if i >= k: the loop visits k+1 … T−1 and k−1 … 0, never "
+        "i = k, where alone > and >= differ.",
+    **{f"skt_lib.geometry.skt.x_{f}__mutmut_20":
+       "in the |a × b| < 1e-12 branch, c > 0 → c >= 0: differs only at a · b = 0 exactly, "
+       "which with |a × b|² + (a · b)² = |a|²|b|² = 1 for the unit vectors the function is "
+       "defined on cannot go with |a × b| < 1e-12 (only a zero vector could)."
+       for f in ("minimal_rotation", "minimal_rotation_naive")},
     "skt_lib.learning.pointnet2.x_fps__mutmut_2":
         "torch.profiler label text only (\"pointnet2.fps\" → \"XXpointnet2.fpsXX\"): no output "
         "depends on it.",
@@ -179,19 +192,27 @@ def _summarise(module: str, name: str, work: Path, mutmut: str, seconds: float,
             "_survivors": survivors, "_equivalent": equivalent}
 
 
-def write_reports(results: dict) -> None:
-    OUT.mkdir(parents=True, exist_ok=True)
-    path = OUT / "mutation.json"
+def write_reports(results: dict, out: Path = OUT, root: Path = ROOT) -> None:
+    """Merge ``results`` (module → :func:`_summarise`'s dict) into ``out/mutation.{json,md}``:
+    each module's entry and section is replaced whole by its latest run, the others kept —
+    except those of a module no longer in the repository (no file ``root/<module>``: a
+    deleted or moved module), which are dropped."""
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "mutation.json"
     summary = json.loads(path.read_text()) if path.is_file() else {}
     details = {}
     for module, r in results.items():
         details[module] = (r.pop("_survivors"), r.pop("_equivalent"))
-        summary[module] = r  # each module's entry is replaced whole by its latest run
+        summary[module] = r
+    summary = {m: r for m, r in summary.items() if (root / m).is_file()}
     path.write_text(json.dumps(dict(sorted(summary.items())), indent=2) + "\n")
-    md = OUT / "mutation.md"
+    md = out / "mutation.md"
     old = md.read_text() if md.is_file() else ""
     sections = dict(re.findall(r"(?ms)^## `(.+?)`\n(.*?)(?=^## `|\Z)", old))
+    sections = {m: text for m, text in sections.items() if m in summary}
     for module, (survivors, equivalent) in details.items():
+        if module not in summary:
+            continue
         r = summary[module]
         lines = [f"killed {r['killed']}, survived {r['survived']}, timeout {r['timeout']}, "
                  f"equivalent {r['equivalent']}, score {r['score']:.3f}; {r['seconds']:.0f} s "
