@@ -161,12 +161,19 @@ def _in_tmp(fn):
         return fn(Path(tmp))
 
 
+def _git(*args) -> str:
+    return subprocess.run(["git", *args], capture_output=True, text=True).stdout.strip()
+
+
 def _commit() -> str:
     """The checked-out commit, ``+dirty`` when tracked files differ from it."""
-    def git(*a):
-        return subprocess.run(["git", *a], capture_output=True, text=True).stdout.strip()
-    head = git("rev-parse", "--short", "HEAD") or "unknown"
-    return head + ("+dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
+    head = _git("rev-parse", "--short", "HEAD") or "unknown"
+    return head + ("+dirty" if _git("status", "--porcelain", "--untracked-files=no") else "")
+
+
+def _last_commit(path: Path) -> str:
+    """The last commit that changed ``path`` ("unknown" outside git or when none did)."""
+    return _git("log", "-1", "--format=%h", "--", str(path)) or "unknown"
 
 
 def main(argv=None) -> int:
@@ -197,8 +204,10 @@ def main(argv=None) -> int:
     old = json.loads(out.read_text()) if set(args.parts) != set(PARTS) and out.exists() else {}
     commit = _commit()
     bench = {k: v for k, v in old.items() if _part_of(k) not in (*args.parts, None)}
-    bench["parts_commit"] = {part: old.get("parts_commit", {}).get(part, "unknown")
-                             for part in PARTS} | {part: commit for part in args.parts}
+    # an older file without the record: its parts came from the last commit that changed it
+    before = old.get("parts_commit") or {part: _last_commit(out) for part in PARTS}
+    bench["parts_commit"] = ({part: before.get(part, "unknown") for part in PARTS}
+                             | {part: commit for part in args.parts})
     for part in PARTS:
         if part in args.parts:
             bench |= measure[part]()

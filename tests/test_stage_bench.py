@@ -45,7 +45,7 @@ def test_bench_parts_replace_their_own_keys_and_keep_the_others(monkeypatch, tmp
     assert got["rrt_plan_s_median"] == 99.0 and got["sim_trials_per_min"] == 3.0
     assert "sim_stale" not in got
     assert got["parts_commit"]["rrt"] == "abc" and got["parts_commit"]["sim"] == "def"
-    assert got["parts_commit"]["render"] == "unknown"
+    assert got["parts_commit"]["render"] == "unknown"  # the old file had no record of it
 
 
 def test_planner_bench_times_both_planners_on_the_same_supports(tiny_dataset):

@@ -122,12 +122,18 @@ def table_one(metrics: dict) -> str:
     lines = []
     if "n_test_supports" in metrics and "n_test_objects" in metrics:
         lines += [f"Success rate (%) on {metrics['n_test_supports']} test supports × "
-                  f"{metrics['n_test_objects']} test objects, one trial per pair and method.", ""]
+                  f"{metrics['n_test_objects']} test objects, one trial per pair and method; "
+                  "brackets: the 95 % interval of All from a bootstrap over test supports (a "
+                  "support's objects mostly hang or fail together: the support is the unit).",
+                  ""]
     lines += ["| method | " + " | ".join(title for _, title in LEVELS) + " |",
               "|---" * (len(LEVELS) + 1) + "|"]
     for m in table_methods(metrics):
-        success = metrics[m]["success"]
-        lines.append(f"| `{m}` | " + " | ".join(_pct(success.get(k)) for k, _ in LEVELS) + " |")
+        success, ci = metrics[m]["success"], metrics[m].get("success_support_ci95") or {}
+        cells = [_pct(success.get(k)) for k, _ in LEVELS]
+        if ci.get("all") and success.get("all") is not None:
+            cells[0] += f" [{_pct(ci['all'][0])}–{_pct(ci['all'][1])}]"
+        lines.append(f"| `{m}` | " + " | ".join(cells) + " |")
     seeds = metrics.get("seeds")
     if seeds and seeds.get("status") == "ok":
         lines += ["", f"The learned methods over training seeds {', '.join(map(str, seeds['seeds']))} "
@@ -172,7 +178,12 @@ def bench_table(bench: dict) -> str:
                       f"({bench.get('rrt_bench_skts', '?')} planned by the one-tree planner, "
                       f"{bench.get('rrt_bench_skts_reference', '?')} by the reference)")
     if "sim_bench_trials" in bench:
-        sample.append(f"simulation over {bench['sim_bench_trials']} oracle trials")
+        sample.append(f"simulation over {bench['sim_bench_trials']} trials (the oracle's and "
+                      f"SCTDN's SKTs; {bench.get('sim_bench_failures_reference', '?')} of them "
+                      "failures)")
+    if "parts_commit" in bench:
+        sample.append("each part at its commit: " + ", ".join(
+            f"{part} {commit}" for part, commit in bench["parts_commit"].items()))
     lines = (["Measured " + "; ".join(sample) + "; medians.", ""] if sample else [])
     lines += ["| key | value | what |", "|---|---|---|"]
     unknown = sorted(set(bench) - set(BENCH_ROWS) - set(BENCH_SAMPLE))
@@ -182,10 +193,12 @@ def bench_table(bench: dict) -> str:
         text = (", ".join(f"{k} {'–' if v is None else f'{v:.1f}'}" for k, v in value.items())
                 if isinstance(value, dict) else fmt.format(value))
         lines.append(f"| `{key}` | {text} | {meaning} |")
-    if "sim_verdict_disagreements" in bench:
-        differ = bench["sim_verdict_disagreements"]
-        lines += ["", "Verdicts the executors disagree on: "
-                  + ("; ".join(f"`{d}`" for d in differ) if differ else "none") + "."]
+    for key, which in (("sim_verdict_disagreements", "the default executor"),
+                       ("sim_verdict_disagreements_previous", "the previous executor")):
+        if key in bench:
+            differ = bench[key]
+            lines += ["", f"Verdicts {which} and the reference disagree on: "
+                      + ("; ".join(f"`{d}`" for d in differ) if differ else "none") + "."]
     if "import_dense_failed" in bench:
         failed = bench["import_dense_failed"]
         lines += ["", "Dense imports refused: " + ("; ".join(f"`{k}`: {v}" for k, v in
