@@ -4,6 +4,7 @@ grasp constraint, the fallen and at-rest checks that end a trial early, and the 
 sweep. Each runs in a world that is not PyBullet's client 0, as a trial does beside another
 world (a planner's): a call that forgets ``physicsClientId`` fails here."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from skt_lib.geometry.se3 import invert, pose_matrix
 from skt_lib.sim import execute
 from skt_lib.sim.hanging import Perturbation
+from skt_lib.sim.robot import Panda
 from skt_lib.sim.world import World
 from tests.sim import scenes
 
@@ -52,11 +54,36 @@ def arm_urdf(directory: Path) -> str:
     return str(path)
 
 
+def spinner_urdf(directory: Path) -> str:
+    """A fixed base with one link on a revolute joint about the base's z, the link's centre
+    of mass 5 cm out along x."""
+    path = Path(directory) / "spinner.urdf"
+    path.write_text("""<?xml version="1.0"?>
+<robot name="spinner"><link name="base">
+<inertial><mass value="0"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>
+</link>
+<link name="arm"><inertial><origin xyz="0.05 0 0"/><mass value="1.0"/>
+<inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial></link>
+<joint name="j" type="continuous"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+<origin xyz="0 0 0"/></joint>
+</robot>""")
+    return str(path)
+
+
 def at(x=0.0, y=0.0, z=0.0, rotvec=(0.0, 0.0, 0.0)) -> np.ndarray:
     t = np.eye(4)
     t[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
     t[:3, 3] = x, y, z
     return t
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """(support URDF, ring URDF, ring vertices): the peg and the reference ring of
+    :mod:`tests.sim.scenes`."""
+    d = tmp_path_factory.mktemp("parts_scene")
+    ring, vertices = scenes.build_ring(d)
+    return scenes.write_support(d), ring, vertices
 
 
 @pytest.fixture
@@ -146,6 +173,30 @@ def test_attach_holds_the_object_where_it_is_up_to_the_force_limit(world, tmp_pa
 
     assert carry(100.0) < 2e-4  # 0.5 kg held still (not snapped to another pose)
     assert carry(0.5) > 0.01  # 0.5 N cannot hold 4.9 N: it falls
+
+
+def test_attach_to_a_moving_link_keeps_the_pose_of_that_moment(world, tmp_path):
+    """Attached to a link that turns at 5 rad/s, the object is carried at the pose relative
+    to the link it had when attached — the link's pose then, not the one PyBullet cached
+    before its last step (2 mm behind, 10 cm out at that speed)."""
+    spinner = world.load(spinner_urdf(tmp_path), at(0.3), fixed=True, friction=0.5)
+    obj = world.load(box_urdf(tmp_path, "obj", (0.02, 0.02, 0.02), 0.1), at(0.3, 0.1, 0.0),
+                     fixed=False, friction=0.5)
+    world.set_gravity_support((0.0, 0.0, 0.0))
+    pb.setJointMotorControl2(spinner, 0, pb.VELOCITY_CONTROL, targetVelocity=5.0, force=500.0,
+                             physicsClientId=world.cid)
+    world.step(20)
+
+    def relative() -> np.ndarray:
+        link = pb.getLinkState(spinner, 0, computeForwardKinematics=1, physicsClientId=world.cid)
+        body = pb.getBasePositionAndOrientation(obj, physicsClientId=world.cid)
+        return invert(pose_matrix(link[0], link[1])) @ pose_matrix(*body)
+
+    execute._attach(world, spinner, 0, obj, 1000.0)
+    held = relative()  # (not before: reading the link's pose here refreshes PyBullet's cache)
+    for _ in range(5):
+        world.step(4)
+        np.testing.assert_allclose(relative(), held, rtol=0, atol=1e-4)
 
 
 def test_fallen_is_below_the_support_and_on_the_floor(tmp_path):
@@ -242,19 +293,171 @@ def test_sweep_depth_looks_at_every_second_pose_and_the_last(world, tmp_path):
     assert sweep([-5, -5, 2, -5, 5], stop_above=0.006) == pytest.approx(5, abs=1e-6)
 
 
-def test_a_trial_beside_another_world_decides_as_one_alone(tmp_path):
+def test_a_trial_beside_another_world_decides_as_one_alone(scene):
     """The same rows whether the trial's world is PyBullet's client 0 or another world is
     open (client 0): a success, a release in the air (ended early as fallen) and a path into
     the peg, with either hand."""
-    support, (ring, vertices) = scenes.write_support(tmp_path), scenes.build_ring(tmp_path)
     cases = [(scenes.straight_skt(), "panda", ""),
              (scenes.straight_skt(offset=(0.0, 0.12, 0.0)), "floating", "not_reached"),
              (scenes.straight_skt(offset=(0.0, 0.0, -0.009)), "panda", "collided_before_hang")]
     for positions, hand, reason in cases:
-        task = scenes.ring_task(support, ring, vertices, positions, hand)
+        task = scenes.ring_task(*scene, positions, hand)
         alone = execute.run_trial(task)
         with World(DT, 50) as other:
             assert other.cid == 0  # nothing else open: the trial below gets another client
             beside = execute.run_trial(task)
         assert beside["row"] == alone["row"] and beside["skt"] == alone["skt"] == 0
         assert alone["row"]["failure_reason"] == reason, alone["row"]
+
+
+def _as_tuple(positions) -> tuple:
+    return tuple(map(tuple, positions))
+
+
+@pytest.mark.parametrize("hand", ["panda", "floating"])
+@pytest.mark.parametrize("sweep", [True, False])
+def test_a_fallback_runs_exactly_what_its_skt_runs_alone(scene, hand, sweep):
+    """The task's own SKT starts with the ring in the peg; set-up runs the alternative, and
+    the trial is the one that SKT gets as a task of its own — the same row (but the grasp's
+    ``skt1/``) and the same trace: the same steps and phases, and while the hand holds the
+    ring the same poses (to rounding: loading the ring at a pose and moving it there round
+    differently, which after the release grows to millimetres) — swept first or not."""
+    into = scenes.straight_skt(hang_s=0.03, length=0.02, offset=(0.0, 0.0, -0.009))
+    clear = scenes.straight_skt()
+    alone = execute.run_trial(dataclasses.replace(scenes.ring_task(*scene, clear, hand),
+                                                  record_every=24))
+    task = dataclasses.replace(scenes.ring_task(*scene, into, hand), record_every=24,
+                               alternatives=(_as_tuple(clear),), sweep_alternatives=sweep)
+    out = execute.run_trial(task)
+    assert alone["row"]["success"] and out["skt"] == 1 and alone["skt"] == 0
+    assert out["row"] == {**alone["row"], "grasp": "skt1/" + alone["row"]["grasp"]}
+    assert len(out["trace"]) == len(alone["trace"]) > 40
+    for a, b in zip(alone["trace"], out["trace"]):
+        assert (a["step"], a["phase"]) == (b["step"], b["phase"])
+        if a["phase"] in ("approach", "hold"):
+            np.testing.assert_allclose(a["object"], b["object"], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("hand", ["panda", "floating"])
+def test_every_skt_starting_in_the_support_or_wall_collides_at_the_start(scene, hand):
+    """Every start pose penetrates (the task's in the peg, its alternative's in the wall):
+    nothing runs, and the row names what the task's own start penetrates."""
+    into = scenes.straight_skt(hang_s=0.03, length=0.02, offset=(0.0, 0.0, -0.009))
+    # beside the wall plate (|y| ≤ 12 cm), ending with the keypoint on the wall
+    wall = np.linspace([0.1, 0.2, -0.05], [0.0, 0.2, -0.05], 10)
+    expect = {"success": False, "failure_reason": "collided_before_hang", "n_executed": 0,
+              "blocked_by": "object-support", "detail": "object penetrates at the start pose",
+              "grasp": ""}
+    for alternatives in ((), (_as_tuple(wall),)):
+        task = dataclasses.replace(scenes.ring_task(*scene, into, hand), alternatives=alternatives)
+        out = execute.run_trial(task)
+        assert {k: out["row"][k] for k in expect} == expect and out["skt"] == 0
+    alone = execute.run_trial(scenes.ring_task(*scene, wall, hand))["row"]
+    assert alone["blocked_by"] == "object-wall" and alone["n_executed"] == 0, alone
+
+
+def test_trace_keeps_every_nth_step_with_its_phase_links_and_object(world, tmp_path):
+    obj = world.load(box_urdf(tmp_path, "obj", (0.02, 0.02, 0.02), 0.1), at(0.2), fixed=False,
+                     friction=0.5)  # falling: its pose differs from frame to frame
+    robot = Panda(world, pose_matrix([0.15, 0.0, 0.3], [0, 0, 0, 1]))
+    for hand in (None, robot):
+        start = world.pose_support(obj)
+        trace = execute._Trace(world, hand, obj, 3)
+        assert trace.frames == [] and trace.skt == 0
+        trace.step(7, "approach")
+        trace.step(2, "hold")
+        assert [(f["step"], f["phase"]) for f in trace.frames] == [(3, "approach"), (6, "approach"),
+                                                                   (9, "hold")]
+        last = trace.frames[-1]
+        assert np.array_equal(last["object"], world.pose_support(obj))
+        assert not np.allclose(trace.frames[0]["object"], start)
+        assert not np.allclose(trace.frames[0]["object"], last["object"])
+        if hand is None:
+            assert all(f["links"] is None for f in trace.frames)
+        else:
+            assert np.array_equal(last["links"], robot.link_poses()) and len(last["links"]) > 8
+        trace.step(2, "retreat")
+        assert len(trace.frames) == 3  # step 11: none
+    quiet = execute._Trace(world, robot, obj, 0)
+    quiet.step(10, "approach")
+    assert quiet.frames == []
+
+
+def _phases(trace) -> dict:
+    out = {}
+    for f in trace:
+        out[f["phase"]] = out.get(f["phase"], 0) + 1
+    return out
+
+
+def test_tiny_trials_rows_and_phases_by_hand(scene):
+    """Whole rows of three floating-hand trials, and their traces step by step: every
+    command of the executed path takes ``steps_per_command`` steps, then ``hold_steps``,
+    ``retreat_steps`` and three tilts of ``steps_per_direction``; the settle, at most
+    ``settle_steps``, ends on a fallen-or-rest check (every ``FALLEN_CHECK_STEPS``), as a
+    fall does."""
+    from skt_lib.geometry.skt import executed_path
+
+    s = scenes.settings()
+    base = {"trial_id": "test/floating", "method": "test", "support_id": "support_test",
+            "object_id": "object_reference", "difficulty": "easy", "category": "ring",
+            "grasp": "pitch45_roll0"}
+
+    def run(positions):
+        task = dataclasses.replace(scenes.ring_task(*scene, positions, "floating"), record_every=1)
+        out = execute.run_trial(task)
+        assert [f["step"] for f in out["trace"]] == list(range(1, len(out["trace"]) + 1))
+        n = len(executed_path(positions, s.step_m, scenes.RING_RADIUS_M))
+        return out["row"], _phases(out["trace"]), n
+
+    row, phases, n = run(scenes.straight_skt())
+    err = row.pop("max_track_err_m")
+    assert row == {**base, "success": True, "failure_reason": "", "n_commands": n,
+                   "n_executed": n, "touched_support": True, "blocked_by": "", "detail": ""}
+    assert 0.0 < err < 0.005 and n > 50
+    settle = phases.pop("settle")
+    assert phases == {"approach": n * s.steps_per_command, "hold": s.hold_steps,
+                      "retreat": s.retreat_steps, "perturb": 3 * s.perturbation.steps_per_direction}
+    assert 0 < settle < s.perturbation.settle_steps and settle % execute.FALLEN_CHECK_STEPS == 0
+
+    row, phases, n = run(scenes.straight_skt(offset=(0.0, 0.12, 0.0)))  # let go in the air
+    assert 0.0 < row.pop("max_track_err_m") < 0.005
+    assert row == {**base, "success": False, "failure_reason": "not_reached", "n_commands": n,
+                   "n_executed": n, "touched_support": False, "blocked_by": "",
+                   "detail": "predicate: touches_floor"}
+    perturb = phases.pop("perturb")
+    assert phases == {"approach": n * s.steps_per_command, "hold": s.hold_steps,
+                      "retreat": s.retreat_steps}
+    assert 0 < perturb < s.perturbation.steps_per_direction
+    assert perturb % execute.FALLEN_CHECK_STEPS == 0
+
+    row, phases, n = run(scenes.straight_skt(offset=(0.0, 0.0, -0.009)))  # into the peg's tip
+    err = row.pop("max_track_err_m")
+    k = row["n_executed"]
+    assert row == {**base, "success": False, "failure_reason": "collided_before_hang",
+                   "n_commands": n, "n_executed": k, "touched_support": False,
+                   "blocked_by": "object-support",
+                   "detail": f"tracking error {1000 * err:.1f} mm at command {k}/{n}"}
+    assert s.track_tol_m < err < 2 * s.track_tol_m and 0 < k < n
+    assert phases == {"approach": k * s.steps_per_command}
+
+
+def test_the_arm_lets_go_and_backs_off_along_its_approach(scene):
+    """After the hold, the gripper opens and retreats ``retreat_m`` straight back along its
+    approach axis (grasp-target z), without turning; the ring stays on the peg."""
+    from skt_lib.sim.robot import GRASP_LINK
+
+    s = scenes.settings()
+    task = dataclasses.replace(scenes.ring_task(*scene, scenes.straight_skt(), "panda"),
+                               record_every=1)
+    out = execute.run_trial(task)
+    assert out["row"]["success"], out["row"]
+    by_phase = {}
+    for f in out["trace"]:
+        by_phase.setdefault(f["phase"], []).append(f)
+    released = by_phase["hold"][-1]["links"][GRASP_LINK + 1]
+    for frame, least in ((by_phase["retreat"][-1], 0.07), (out["trace"][-1], 0.079)):
+        rel = np.linalg.inv(released) @ frame["links"][GRASP_LINK + 1]
+        assert -s.retreat_m - 1e-4 < rel[2, 3] < -least
+        assert np.linalg.norm(rel[:2, 3]) < 1e-3 and np.allclose(rel[:3, :3], np.eye(3), atol=1e-4)
+    assert len(by_phase["retreat"]) == s.retreat_steps
