@@ -5,6 +5,7 @@ sweep. Each runs in a world that is not PyBullet's client 0, as a trial does bes
 world (a planner's): a call that forgets ``physicsClientId`` fails here."""
 
 import dataclasses
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -257,6 +258,12 @@ def test_at_rest_over_a_whole_window_within_a_quarter_of_the_bounds(world, tmp_p
     assert run([(0.0, 0.0)] + [(0.0, 0.8 * angle)] * 6) == [False] * 6 + [True]
     assert run([(0.0, 0.0)] * 6 + [(0.0, 1.2 * angle)]) == [False] * 7
     assert run([(0.0, 2 * angle)] + [(0.0, 0.0)] * 7) == [False] * 7 + [True]
+    # held still at a turn whose quaternion's square rounds to 1 + 2⁻⁵²: no angle (not NaN)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert run([(0.0, 0.08)] * 7) == [False] * 6 + [True]
+    quat = pb.getBasePositionAndOrientation(obj, physicsClientId=world.cid)[1]
+    assert float(np.dot(quat, quat)) > 1.0  # the case at hand
     world.set_pose_support(obj, at(0.05, 0.0, 0.05))  # lifted off, stepped without gravity
     world.set_gravity_support((0.0, 0.0, 0.0))
     world.step(1)
