@@ -150,6 +150,10 @@ def test_blockers_name_each_mover_obstacle_pair_in_order(world, tmp_path):
     world.step(1)
     assert execute._blockers(world, movers, fixed) == ""
     assert execute._blockers(world, movers, fixed, start=True) == ""
+    # moved into the support but not stepped: penetrating, yet no contact until the next step
+    world.set_pose_support(robot, at(0.085))
+    assert execute._blockers(world, movers, fixed, start=True) == "robot-support"
+    assert execute._blockers(world, movers, fixed) == ""
 
 
 @pytest.mark.parametrize("link", [-1, 0])
@@ -405,13 +409,17 @@ def test_tiny_trials_rows_and_phases_by_hand(scene):
     fall does."""
     from skt_lib.geometry.skt import executed_path
 
+    # tilts of 100 steps: not a multiple of FALLEN_CHECK_STEPS, so the last check of each
+    # comes after a shorter stretch
     s = scenes.settings()
+    pert = dataclasses.replace(s.perturbation, steps_per_direction=100)
     base = {"trial_id": "test/floating", "method": "test", "support_id": "support_test",
             "object_id": "object_reference", "difficulty": "easy", "category": "ring",
             "grasp": "pitch45_roll0"}
 
     def run(positions):
-        task = dataclasses.replace(scenes.ring_task(*scene, positions, "floating"), record_every=1)
+        task = dataclasses.replace(scenes.ring_task(*scene, positions, "floating",
+                                                    perturbation=pert), record_every=1)
         out = execute.run_trial(task)
         assert [f["step"] for f in out["trace"]] == list(range(1, len(out["trace"]) + 1))
         n = len(executed_path(positions, s.step_m, scenes.RING_RADIUS_M))
@@ -424,8 +432,8 @@ def test_tiny_trials_rows_and_phases_by_hand(scene):
     assert 0.0 < err < 0.005 and n > 50
     settle = phases.pop("settle")
     assert phases == {"approach": n * s.steps_per_command, "hold": s.hold_steps,
-                      "retreat": s.retreat_steps, "perturb": 3 * s.perturbation.steps_per_direction}
-    assert 0 < settle < s.perturbation.settle_steps and settle % execute.FALLEN_CHECK_STEPS == 0
+                      "retreat": s.retreat_steps, "perturb": 3 * 100}
+    assert 0 < settle < pert.settle_steps and settle % execute.FALLEN_CHECK_STEPS == 0
 
     row, phases, n = run(scenes.straight_skt(offset=(0.0, 0.12, 0.0)))  # let go in the air
     assert 0.0 < row.pop("max_track_err_m") < 0.005
@@ -435,8 +443,7 @@ def test_tiny_trials_rows_and_phases_by_hand(scene):
     perturb = phases.pop("perturb")
     assert phases == {"approach": n * s.steps_per_command, "hold": s.hold_steps,
                       "retreat": s.retreat_steps}
-    assert 0 < perturb < s.perturbation.steps_per_direction
-    assert perturb % execute.FALLEN_CHECK_STEPS == 0
+    assert 0 < perturb < 100 and perturb % execute.FALLEN_CHECK_STEPS == 0
 
     row, phases, n = run(scenes.straight_skt(offset=(0.0, 0.0, -0.009)))  # into the peg's tip
     err = row.pop("max_track_err_m")
@@ -462,9 +469,106 @@ def test_the_arm_lets_go_and_backs_off_along_its_approach(scene):
     by_phase = {}
     for f in out["trace"]:
         by_phase.setdefault(f["phase"], []).append(f)
+    base = out["trace"][0]["links"][0]  # the base's centre-of-mass frame: above its origin
+    assert np.allclose(base[:3, :3], np.eye(3), atol=1e-12)  # unturned, where put
+    assert np.allclose(base[:2, 3], s.robot_base[:2], atol=1e-12)
     released = by_phase["hold"][-1]["links"][GRASP_LINK + 1]
     for frame, least in ((by_phase["retreat"][-1], 0.07), (out["trace"][-1], 0.079)):
         rel = np.linalg.inv(released) @ frame["links"][GRASP_LINK + 1]
         assert -s.retreat_m - 1e-4 < rel[2, 3] < -least
         assert np.linalg.norm(rel[:2, 3]) < 1e-3 and np.allclose(rel[:3, :3], np.eye(3), atol=1e-4)
     assert len(by_phase["retreat"]) == s.retreat_steps
+
+
+def test_a_trial_without_grasp_candidates_is_refused(scene):
+    task = dataclasses.replace(scenes.ring_task(*scene, scenes.straight_skt()), grasps=())
+    with pytest.raises(ValueError, match=r"^test/panda: no grasp candidates$"):
+        execute.run_trial(task)
+
+
+def test_a_float32_keypoint_is_widened_first(scene):
+    """A keypoint of numpy float32 values (a turned frame, so products round) runs the trial
+    its float64 values run, to the bit."""
+    from skt_lib.sim.grasp import grasp_candidates
+
+    support, ring, vertices = scene
+    keypoint = scenes.RING_KEYPOINT.copy()
+    keypoint[:3, :3] = keypoint[:3, :3] @ Rotation.from_rotvec([0.05, -0.03, 0.02]).as_matrix()
+    narrow = keypoint.astype(np.float32)
+    grasps = grasp_candidates(vertices, narrow.astype(float), (45.0,), (0.0,))
+    task = dataclasses.replace(scenes.ring_task(*scene, scenes.straight_skt(), "floating"),
+                               grasps=grasps)
+    rows = [execute.run_trial(dataclasses.replace(task, keypoint=k))["row"]
+            for k in (tuple(narrow.ravel()), tuple(narrow.astype(float).ravel().tolist()))]
+    assert rows[0] == rows[1] and rows[0]["success"], rows
+
+
+@pytest.mark.parametrize("hand,executor", [("panda", "rest_exit"), ("floating", "rest_exit"),
+                                           ("floating", "reference")])
+def test_released_at_the_pegs_tip_it_touches_then_drops(scene, hand, executor):
+    """Let go 1 cm past the tip, the ring touches the peg during the retreat and falls to
+    the floor: dropped, not not_reached — whether the trial ends as soon as it lies there or
+    (the reference) runs the whole perturbation, where it no longer touches the peg."""
+    task = scenes.ring_task(*scene, scenes.straight_skt(hang_s=0.1), hand, executor=executor)
+    out = execute.run_trial(dataclasses.replace(task, record_every=1))
+    row = out["row"]
+    assert (row["failure_reason"], row["touched_support"], row["detail"]) == (
+        "dropped", True, "predicate: touches_floor"), row
+    perturbed = sum(f["phase"] == "perturb" for f in out["trace"])
+    assert (perturbed == 720) if executor == "reference" else (perturbed < 240)
+
+
+def test_out_of_reach_names_the_set_ups_failure_and_the_fallbacks_tried(scene):
+    far = scenes.straight_skt(offset=(0.0, 1.5, 0.0))
+    alone = execute.run_trial(scenes.ring_task(*scene, far))["row"]
+    assert alone["detail"].startswith("no reachable grasp (6 tried: 6 unreachable_hang)")
+    assert "further" not in alone["detail"]
+    task = dataclasses.replace(scenes.ring_task(*scene, far), alternatives=(_as_tuple(far),))
+    both = execute.run_trial(task)["row"]
+    assert both["detail"] == alone["detail"] + "; nor on any of 1 further SKTs"
+    assert both["failure_reason"] == alone["failure_reason"] == "ik_failed"
+
+
+def _motion(trace, phase: str) -> tuple[float, float]:
+    """Distance the object's frame travelled and angle it turned over a phase (m, rad)."""
+    poses = np.stack([f["object"] for f in trace if f["phase"] == phase])
+    dist = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum()
+    rel = np.einsum("nji,njk->nik", poses[:-1, :3, :3], poses[1:, :3, :3])
+    turn = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1)).sum()
+    return float(dist), float(turn)
+
+
+def test_the_objects_damping_is_its_own_while_perturbed_and_while_settling(scene):
+    """Raise the object's linear or angular damping (from PyBullet's 0.04) and the hung ring
+    moves or turns less while perturbed; lower its settle damping and it takes longer to
+    come to rest — each number reaches the object."""
+    def run(**changes):
+        task = scenes.ring_task(*scene, scenes.straight_skt(), "floating", **changes)
+        out = execute.run_trial(dataclasses.replace(task, record_every=1))
+        assert out["row"]["success"], out["row"]
+        settle = sum(f["phase"] == "settle" for f in out["trace"])
+        return _motion(out["trace"], "perturb"), settle
+
+    (dist, turn), settle = run()
+    (dist_lin, _), _ = run(linear_damping=2.0)
+    (_, turn_ang), _ = run(angular_damping=2.0)
+    assert dist_lin < 0.9 * dist and turn_ang < 0.7 * turn
+    assert run(settle_angular_damping=0.04)[1] > settle  # default 5 /s
+    assert run(settle_linear_damping=5.0)[1] != settle  # default 1 /s
+
+
+def test_the_support_is_fixed_even_with_a_mass(scene, tmp_path):
+    """The executor fixes the support's base: one whose URDF gives it 2 kg (where a massless
+    one would stay put by itself) decides the same trial as the massless one."""
+    support, ring, vertices = scene
+    text = Path(support).read_text()
+    assert text.count('<mass value="0"/>') == 1
+    heavy = tmp_path / "heavy_support.urdf"
+    heavy.write_text(text.replace('<mass value="0"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" '
+                                  'iyz="0" izz="0"/>', '<mass value="2"/><inertia ixx="0.01" '
+                                  'ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>'))
+    assert heavy.read_text() != text
+    task = scenes.ring_task(support, ring, vertices, scenes.straight_skt(), "floating")
+    rows = [execute.run_trial(dataclasses.replace(task, support_urdf=u))["row"]
+            for u in (support, str(heavy))]
+    assert rows[0] == rows[1] and rows[0]["success"]
