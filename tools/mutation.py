@@ -77,6 +77,45 @@ EQUIVALENT: dict[str, str] = {
        "which with |a × b|² + (a · b)² = |a|²|b|² = 1 for the unit vectors the function is "
        "defined on cannot go with |a × b| < 1e-12 (only a zero vector could)."
        for f in ("minimal_rotation", "minimal_rotation_naive")},
+    **{f"skt_lib.sim.execute.xǁ_Anchorǁ__init____mutmut_{i}":
+       "the anchor's collision shape index −1 → −2 (19) or visual shape index −1 → +1 or −2 "
+       "(20, 21): PyBullet attaches no shape for any of them (checked in a trial's world, "
+       "the Panda's visual meshes loaded: getCollisionShapeData and getVisualShapeData are "
+       "empty), and a visual shape would take no part in the physics anyway."
+       for i in (19, 20, 21)},
+    "skt_lib.sim.execute.x__attach__mutmut_12":
+        "getLinkState(computeForwardKinematics=1 → 2): a flag, any non-zero value computes it.",
+    **{f"skt_lib.sim.execute.x__attach__mutmut_{i}":
+       "the jointAxis of a JOINT_FIXED constraint ([0, 0, 0] → None or a unit axis; 44, "
+       "61–63) or its childFramePosition [0, 0, 0] → None (46, PyBullet's default): a fixed "
+       "constraint has no axis; checked bit for bit over 100 steps holding a box, to a base "
+       "and to a link."
+       for i in (44, 46, 61, 62, 63)},
+    **{f"skt_lib.sim.execute.x__choose_skt__mutmut_{i}":
+       'the mover\'s name in the start-penetration check ("object" → "XXobjectXX" / '
+       '"OBJECT"): only whether _blockers returns a non-empty string is used there.'
+       for i in (33, 34)},
+    "skt_lib.sim.execute.x__choose_skt__mutmut_38":
+        "the floating hand's set-up result True → False: run_trial only asks whether it is "
+        "None (and, with a robot, a GraspFailure); without a robot it is not used.",
+    "skt_lib.sim.execute.x__choose_skt__mutmut_63":
+        "_sweep_depth(stop_above=SWEEP_TOL_M) → the full sweep, compared with > SWEEP_TOL_M: "
+        "the sweep stops early only at a pose deeper than the tolerance, so whether the "
+        "result exceeds it is the same (only time changes).",
+    **{f"skt_lib.sim.execute.x__sweep_depth__mutmut_{i}":
+       "min_distance's query radius 0.0 → its default 0.05 (26) or 1.0 (27): a wider query "
+       "adds only points at positive distance, whose negation never beats the running depth "
+       "that starts at 0; penetrations come out the same (checked: −1, −2.5, −4, −6 mm "
+       "bit for bit)."
+       for i in (26, 27)},
+    **{f"skt_lib.sim.execute.xǁ_Fallenǁ{m}__mutmut_7":
+       "getAABB(body, -1) → getAABB(body): linkIndex defaults to −1 (the base)."
+       for m in ("__init__", "__call__")},
+    **{f"skt_lib.sim.execute.x_run_trial__mutmut_{i}":
+       "Panda(visual=reference) → visual None / the default False: the visual meshes are "
+       "drawn, never simulated (checked: the reference executor's rows and traces, object "
+       "and link poses, bit for bit on a success and a collision)."
+       for i in (110, 114)},
     "skt_lib.learning.pointnet2.x_fps__mutmut_2":
         "torch.profiler label text only (\"pointnet2.fps\" → \"XXpointnet2.fpsXX\"): no output "
         "depends on it.",
