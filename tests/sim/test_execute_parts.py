@@ -572,3 +572,24 @@ def test_the_support_is_fixed_even_with_a_mass(scene, tmp_path):
     rows = [execute.run_trial(dataclasses.replace(task, support_urdf=u))["row"]
             for u in (support, str(heavy))]
     assert rows[0] == rows[1] and rows[0]["success"]
+
+
+def test_with_no_grasp_on_any_skt_the_row_gives_the_tasks_own_failure(scene):
+    """Set-up finds no grasp on any SKT: the row describes the task's own SKT's failure —
+    even when a clear alternative was tried before it (an IK tolerance nothing meets; the
+    two failures differ in their error) — or, where the task's own start penetrates the peg
+    (never set up), the first one tried."""
+    def detail(positions, alternatives=(), **changes):
+        task = dataclasses.replace(scenes.ring_task(*scene, positions, **changes),
+                                   alternatives=tuple(map(_as_tuple, alternatives)))
+        row = execute.run_trial(task)["row"]
+        assert row["failure_reason"] == "ik_failed" and row["n_executed"] == 0, row
+        return row["detail"]
+
+    into, clear = scenes.straight_skt(offset=(0.0, 0.0, -0.009)), scenes.straight_skt()
+    own, other = detail(into, ik_tol_m=1e-7), detail(clear, ik_tol_m=1e-7)
+    assert own != other
+    assert detail(into, [clear], ik_tol_m=1e-7) == own + "; nor on any of 1 further SKTs"
+    start_in = scenes.straight_skt(hang_s=0.03, length=0.02, offset=(0.0, 0.0, -0.009))
+    far = scenes.straight_skt(offset=(0.0, 1.5, 0.0))
+    assert detail(start_in, [far]) == detail(far) + "; nor on any of 1 further SKTs"
