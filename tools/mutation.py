@@ -111,6 +111,9 @@ EQUIVALENT: dict[str, str] = {
     **{f"skt_lib.sim.execute.xǁ_Fallenǁ{m}__mutmut_7":
        "getAABB(body, -1) → getAABB(body): linkIndex defaults to −1 (the base)."
        for m in ("__init__", "__call__")},
+    "skt_lib.sim.execute.x_run_trial__mutmut_44":
+        'the row\'s initial failure_reason "" → "XXXX": every return goes through _end, '
+        "which sets it.",
     **{f"skt_lib.sim.execute.x_run_trial__mutmut_{i}":
        "Panda(visual=reference) → visual None / the default False: the visual meshes are "
        "drawn, never simulated (checked: the reference executor's rows and traces, object "
