@@ -1,4 +1,4 @@
-"""Parquet schemas of every table, defined once (documented key by key in README.md)."""
+"""Parquet schemas of every table, defined once (documented column by column in docs/, one section per schema)."""
 
 import pyarrow as pa
 

@@ -1,5 +1,5 @@
 """The hanging aperture of an object mesh in its author's frame, and the object frame built
-from it (README "Frames": origin at the aperture centre, +x the aperture axis, +z up when the
+from it (docs/frames.md: origin at the aperture centre, +x the aperture axis, +z up when the
 object hangs from a rod along x).
 
 The aperture is the through-hole that admits the largest rod. For a direction ``d`` the

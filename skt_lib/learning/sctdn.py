@@ -38,7 +38,8 @@ class SctdnConfig:
     nsample: int = 16  # neighbours grouped per centre
     condition: str = "shape"  # "shape" | "contact_point": the deformation's conditioning feature
     # waypoints over which the deformation fades in from the hang: offset i is scaled by
-    # min(1, i / hang_taper), so ξ_0 stays at the contact (0: no taper, the paper's)
+    # min(1, i / hang_taper), so ξ_0 stays where the template puts it, release_lift_m above
+    # the contact (0: no taper, the paper's)
     hang_taper: int = 0
     # read-out (not in the paper): 0 returns the classifier's family, deformed; n ≥ 1 offers
     # the deformed SKT and the aligned template of each of the n most probable families and
