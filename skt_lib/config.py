@@ -153,7 +153,7 @@ class RrtSktsParams(_Section):
     max_release_offset_m: float = Field(ge=0.0, le=0.004, description="How far from the hang ξ_0 may be, lifted above it and/or moved back along the arrival (the object drops or slides in); ≤ 4 mm, so every SKT ends within 5 mm of the hang.")
     check_step_m: float = Field(gt=0.0, le=0.01, description="Largest probe-point motion between checked poses.")
     clearance_m: float = Field(ge=0.0, le=0.01, description="PyBullet distance the reference object keeps from support and wall.")
-    probe_train_objects: bool = Field(description="Plan with the training objects beside the reference (see README).")
+    probe_train_objects: bool = Field(description="Plan with the training objects beside the reference (docs/pipeline.md, rrt_skts).")
     penetration_tol_m: float = Field(ge=0.0, le=0.01, description="Deepest penetration allowed to a training object.")
     goal_bias: float = Field(gt=0.0, lt=1.0, description="Share of tree samples drawn in the start region.")
     surface_bias: float = Field(ge=0.0, lt=1.0, description="Share of tree samples drawn near the support's surface.")
@@ -234,24 +234,28 @@ class TrainParams(_Section):
     feat_dim: int = Field(ge=8, le=1024, description="Per-point feature width (affordance head and shape feature).")
     lstm_hidden: int = Field(ge=8, le=1024, description="Deformation LSTM hidden width (paper: 256).")
     contact_weight: float = Field(ge=0.0, le=100.0, description="Weight of the contact cross-entropy L_p (not in the paper; 0 switches it off).")
-    hang_taper_waypoints: int = Field(ge=0, le=1000, description="Waypoints over which the deformation fades in from the hang: offset i is scaled by min(1, i / this), so ξ_0 stays at the predicted contact (not in the paper; 0: deform every waypoint; must be < clustering.T).")
+    hang_taper_waypoints: int = Field(ge=0, le=1000, description="Waypoints over which the deformation fades in from the hang: offset i is scaled by min(1, i / this), so ξ_0 stays where the template puts it, release_lift_m above the predicted contact (not in the paper; 0: deform every waypoint; must be < clustering.T).")
     check_families: int = Field(ge=0, le=100, description="SCTDN read-out (not in the paper): 0 returns the classifier's family, deformed; n ≥ 1 offers the deformed SKT and the aligned template of each of the n most probable families and returns the one whose reference ring cuts least into the input cloud (skt_lib.learning.cloud_check; must be ≤ clustering.k).")
     threads: int = Field(ge=1, le=256, description="Torch CPU threads while training (fixed, not the core count: float sums depend on it, so the same value gives the same weights on any machine).")
 
 
-BASELINE_MODELS = ("sctdn_cp_feature", "vatmart", "vatmart_mod")
+BASELINE_MODELS = ("sctdn_cp_feature", "vatmart", "vatmart_mod", "skt_flow")
 METHODS = ("oracle", "oracle_floating", "template_only", "sctdn", "kpam", *BASELINE_MODELS,
            "omnihang")
 
 
 class TrainBaselinesParams(_Section):
     models: tuple[Literal[BASELINE_MODELS], ...] = Field(
-        description="Baselines trained with train's loop, data and budget: sctdn_cp_feature (Table II ablation: deformation conditioned on the contact-point feature), vatmart (CVAE on the contact-point feature), vatmart_mod (CVAE on the shape-conditioned feature).")
+        description="Baselines trained with train's loop, data and budget: sctdn_cp_feature (Table II ablation: deformation conditioned on the contact-point feature), vatmart (CVAE on the contact-point feature), vatmart_mod (CVAE on the shape-conditioned feature), skt_flow (conditional flow matching over the SKT's control points, its samples ordered by the cloud check).")
     latent_dim: int = Field(ge=1, le=1024, description="VAT-Mart CVAE latent width (paper: 128).")
     hidden: int = Field(ge=8, le=4096, description="VAT-Mart CVAE encoder/decoder MLP width.")
     n_control_points: int = Field(ge=2, le=1000, description="VAT-Mart decoder: control points, linearly interpolated to the clustering.T waypoints (≤ T).")
     vatmart_kl_weight: float = Field(ge=0.0, le=10.0, description="KL weight of vatmart (paper: 0.1).")
     vatmart_mod_kl_weight: float = Field(ge=0.0, le=10.0, description="KL weight of vatmart_mod (paper: 0.01).")
+    skt_flow_n_control: int = Field(ge=2, le=1000, description="skt_flow: control points it generates, linearly interpolated to the clustering.T waypoints (≤ T; 12 reproduce the validation SKTs to 0.65 mm mean, 8 to 1.0 mm).")
+    skt_flow_steps: int = Field(ge=1, le=1000, description="skt_flow: Euler steps from noise to an SKT.")
+    skt_flow_hidden: int = Field(ge=8, le=4096, description="skt_flow: width of its MLP (three hidden layers) that predicts the flow's end point.")
+    skt_flow_draws: int = Field(ge=1, le=256, description="skt_flow: (noise, ground-truth SKT, time) draws per cloud per training step (the backbone runs once per cloud).")
 
     @model_validator(mode="after")
     def _unique(self) -> "TrainBaselinesParams":
@@ -262,8 +266,8 @@ class TrainBaselinesParams(_Section):
 
 class SimEvalParams(_Section):
     methods: tuple[Literal[METHODS], ...] = Field(
-        min_length=1, description="Methods evaluated (Table I rows); oracle_floating: the oracle SKT carried by a floating hand (no arm); sctdn_cp_feature, vatmart, vatmart_mod need train_baselines to train them; omnihang plans with OMPL on the cloud, given the ground-truth hang.")
-    n_proposals: int = Field(ge=1, le=100, description="VAT-Mart methods: proposals per support; a (support, object) trial succeeds if any proposal hangs (the paper's count); success_single counts the first proposal only.")
+        min_length=1, description="Methods evaluated (Table I rows); oracle_floating: the oracle SKT carried by a floating hand (no arm); sctdn_cp_feature, vatmart, vatmart_mod, skt_flow need train_baselines to train them; omnihang plans with OMPL on the cloud, given the ground-truth hang.")
+    n_proposals: int = Field(ge=1, le=100, description="Proposing methods (vatmart, vatmart_mod, skt_flow): proposals per support; a (support, object) trial succeeds if any proposal hangs (the paper's count); success_single counts the first proposal only (skt_flow's: the sample its cloud check ranks first).")
     omnihang_max_checks: int = Field(ge=100, le=10_000_000, description="omnihang: RRT-Connect budget per support, in collision checks (deterministic, unlike a time limit; a failed plan falls back to the straight approach).")
     robot_base_m: tuple[float, float, float] = Field(description="World position of the Panda base, m.")
     linear_damping: float = Field(ge=0.0, le=10.0, description="Object linear damping (1/s) while carried, released and perturbed; PyBullet's default 0.04, as the anchors' (DESIGN §5).")

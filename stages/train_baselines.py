@@ -4,11 +4,13 @@ data, validation split and budget (the ``train`` params), one seed.
 - ``sctdn_cp_feature``: SCTDN whose deformation is conditioned on the contact-point feature
   instead of the shape-conditioned one (Table II, middle row);
 - ``vatmart``: affordance + CVAE on the contact-point feature, KL ``vatmart_kl_weight``;
-- ``vatmart_mod``: the same CVAE on the shape-conditioned feature, KL ``vatmart_mod_kl_weight``.
+- ``vatmart_mod``: the same CVAE on the shape-conditioned feature, KL ``vatmart_mod_kl_weight``;
+- ``skt_flow``: conditional flow matching over the SKT's control points
+  (:mod:`skt_lib.learning.flow`), its samples ordered by the cloud check.
 
 Inputs:  as ``train``; params common.seed, train, train_baselines, sim_eval.n_proposals.
-Outputs: data/train_baselines/<model>/ (``sctdn.pt``+``sctdn.json`` or ``vatmart.pt``+
-         ``vatmart.json``); reports/train_baselines/{metrics.json, report.md, PNGs}.
+Outputs: data/train_baselines/<model>/ (``sctdn.pt``+``sctdn.json``, ``vatmart.pt``+
+         ``vatmart.json`` or ``skt_flow.pt``+``skt_flow.json``); reports/train_baselines/{metrics.json, report.md, PNGs}.
 """
 
 import logging
@@ -82,9 +84,14 @@ def _write_report(rep: Path, metrics: dict, histories: dict, n_train: int, n_val
                 f"one proposal (the first of {n_prop} fixed validation latents), "
                 f"`val_best_of_n_l2_mm` the best of the {n_prop} (the paper's best-of-10 "
                 "counts a trial as hung if any proposal hangs), `val_spread_mm` the mean "
-                "distance of the proposals from their mean (0: the latent is ignored).")
+                "distance of the proposals from their mean (0: the latent is ignored). "
+                f"`skt_flow`: `val_traj_l2_mm` is the one of {n_prop} samples (fixed validation "
+                "noise) that the cloud check ranks first — the SKT it executes; "
+                "`val_first_l2_mm` the first sample, unchecked; `val_coverage_1cm` the share "
+                "of a support's ground-truth SKTs some sample comes within 1 cm of. The epoch "
+                "is chosen on `val_traj_l2_mm` for every model.")
     for m, h in histories.items():
-        curves(h, [k for k in ("val_traj_l2_mm", "val_best_of_n_l2_mm",
+        curves(h, [k for k in ("val_traj_l2_mm", "val_first_l2_mm", "val_best_of_n_l2_mm",
                                "val_template_only_l2_mm") if k in h[0]],
                report.figure(f"val_l2_{m}.png", f"{m}: validation waypoint error per epoch"),
                m, "mm")

@@ -56,8 +56,8 @@ def train_models(params, root: Path, seed: int, out: Path, methods) -> None:
             SktPredictor(model).save(out / "train")
         for name in pb.models:
             d = out / "train_baselines" / name
-            if name in needed and not (d / "sctdn.json").exists() \
-                    and not (d / "vatmart.json").exists():
+            if name in needed and not any((d / f"{kind}.json").exists()
+                                          for kind in ("sctdn", "vatmart", "skt_flow")):
                 predictor, _ = train_baseline(name, cfg, data.templates, data.train, data.val,
                                               st, seed, params.sim_eval.n_proposals, pb)
                 predictor.save(d)

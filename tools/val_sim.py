@@ -97,7 +97,7 @@ def main(argv=None) -> int:
         return 2
     models = load_models(args.data_root, args.methods, T)
     for name, directory in args.model:
-        models[name] = (VatMartPredictor if name in PROPOSING else SktPredictor).load(directory)
+        models[name] = PREDICTOR_OF[name].load(directory)
     readout = {k: v for k, v in (("hang_taper", args.hang_taper),
                                  ("check_families", args.check_families)) if v is not None}
     if readout:

@@ -15,6 +15,10 @@
 - ``vatmart`` / ``vatmart_mod``: CVAE proposals (``train_baselines``); ``propose`` gives
   ``n_proposals`` SKTs (the paper counts a trial as hung if any of them hangs), ``predict``
   the first of them (the honest single-sample rate).
+- ``skt_flow``: conditional flow-matching samples (``train_baselines``,
+  :mod:`skt_lib.learning.flow`) ordered by the cloud check on the observed points; ``predict``
+  gives the clearest, the one SKT its single-SKT row executes, ``propose`` all
+  ``n_proposals`` (its best-of-N row, as VAT-Mart's).
 - ``omnihang``: OMPL RRT-Connect to the ground-truth hanging pose (privileged), collision
   checked against the partial cloud only (:mod:`skt_lib.eval.omnihang`).
 
@@ -29,16 +33,21 @@ import numpy as np
 
 from skt_lib.errors import DataError
 from skt_lib.geometry.skt import skt_frames
+from skt_lib.learning.flow import FlowPredictor
 from skt_lib.learning.predictor import Skt, SktPredictor
 from skt_lib.learning.vatmart import VatMartPredictor
 from skt_lib.seeding import item_rng
 
 #: Methods that need a trained model: SktPredictor ones, then the VAT-Mart proposers.
 LEARNED = ("template_only", "sctdn", "sctdn_cp_feature")
-PROPOSING = ("vatmart", "vatmart_mod")
+PROPOSING = ("vatmart", "vatmart_mod", "skt_flow")
 #: Which trained model a learned method runs (``data/train`` or ``data/train_baselines/<name>``).
 MODEL_OF = {"template_only": "sctdn", "sctdn": "sctdn", "sctdn_cp_feature": "sctdn_cp_feature",
-            "vatmart": "vatmart", "vatmart_mod": "vatmart_mod"}
+            "vatmart": "vatmart", "vatmart_mod": "vatmart_mod", "skt_flow": "skt_flow"}
+#: The predictor class of each trained model (:data:`MODEL_OF`'s values).
+PREDICTOR_OF = {"sctdn": SktPredictor, "sctdn_cp_feature": SktPredictor,
+                "vatmart": VatMartPredictor, "vatmart_mod": VatMartPredictor,
+                "skt_flow": FlowPredictor}
 #: Methods built from the support's ground truth (privileged): the oracles follow a stored SKT,
 #: kpam and omnihang aim at its hang (ξ_0). No ground truth, no such method.
 PRIVILEGED = ("oracle", "oracle_floating", "kpam", "omnihang")
@@ -98,9 +107,9 @@ class Kpam:
 
 
 class Proposals:
-    """A proposing model (VAT-Mart): ``propose`` returns ``n`` SKTs drawn with ``rng`` (pass a
-    fresh per-support generator: the proposals are then a function of the support);
-    ``predict`` the first of them."""
+    """A proposing model (VAT-Mart, skt_flow): ``propose`` returns ``n`` SKTs drawn with
+    ``rng`` (pass a fresh per-support generator: the proposals are then a function of the
+    support); ``predict`` the first of them (skt_flow's: the clearest by the cloud check)."""
 
     def __init__(self, predictor, rng: np.random.Generator, n: int):
         self.predictor, self.n = predictor, n
@@ -198,7 +207,7 @@ def model_dir(root: Path, method: str) -> Path:
 def load_model(method: str, d: Path, T: int):
     """The trained model of learned ``method`` from the folder ``d``; :class:`DataError` if it
     cannot be loaded or predicts other than ``T`` waypoints."""
-    model = (VatMartPredictor if MODEL_OF[method] in PROPOSING else SktPredictor).load(d)
+    model = PREDICTOR_OF[MODEL_OF[method]].load(d)
     if model.cfg.T != T:
         raise DataError(f"{d}: model predicts T = {model.cfg.T}, clustering.T is {T}")
     return model
