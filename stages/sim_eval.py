@@ -20,7 +20,8 @@ import pandas as pd
 
 from skt_lib.config import load_params
 from skt_lib.errors import DataError
-from skt_lib.eval.methods import load_models, method_for
+from skt_lib.eval.coverage import multimodality_coverage
+from skt_lib.eval.methods import MODEL_OF, load_models, method_for
 from skt_lib.eval.metrics import sim_metrics
 from skt_lib.eval.protocol import (
     load_test_set,
@@ -89,6 +90,8 @@ def main(argv=None) -> int:
     plans = {s.support_id: made["omnihang", s.support_id].last
              for s in supports} if "omnihang" in p.methods else None
     metrics = sim_metrics(trials, pairs, p.methods, p.n_proposals, plans, seed)
+    metrics["multimodality_coverage"] = multimodality_coverage(
+        positions, supports, [m for m in p.methods if m in MODEL_OF], p.n_proposals)
     metrics["n_test_supports"] = len(supports)
     metrics["n_test_supports_without_gt"] = len(missing)
     metrics["n_test_objects"] = len(objects)

@@ -65,7 +65,16 @@ def test_metrics_contract_matches_the_trials_table(evaluated):
     setup = trials[(trials["failure_reason"] == "ik_failed") & (trials["n_executed"] == 0)]
     assert setup["detail"].str.startswith("no reachable grasp").all()
     assert set(trials.loc[~trials["success"], "failure_reason"]) <= set(REASONS)
-    _check_proposals(metrics, trials, load_params(params).sim_eval.n_proposals, n_pairs)
+    n_prop = load_params(params).sim_eval.n_proposals
+    for m in ("vatmart", "skt_flow"):
+        _check_proposals(metrics, trials, n_prop, n_pairs, m)
+    # multimodality: every learned method, its sample count, a share per level that has supports
+    cov = metrics["multimodality_coverage"]
+    assert set(cov) == {"template_only", "sctdn", "vatmart", "skt_flow"}
+    for m, c in cov.items():
+        assert c["n_samples"] == (n_prop if m in ("vatmart", "skt_flow") else 1)
+        assert 0.0 <= c["all"] <= 1.0
+        assert {lv for lv in LEVELS if c[lv] is not None} == set(trials["difficulty"])
     o = metrics["omnihang"]
     assert 0.0 <= o["plan_solved_rate"] <= 1.0
     assert o["n_trials"] == n_pairs
@@ -73,6 +82,8 @@ def test_metrics_contract_matches_the_trials_table(evaluated):
     text = (rep / "report.md").read_text()
     assert "Table I" in text and "success.png" in text and (rep / "success.png").exists()
     assert "Table II" in text and "first proposal only" in text
+    assert "skt_flow, one SKT (the cloud check's pick of its samples)" in text
+    assert "Multimodality: ground-truth SKTs reached" in text
     # the orderings the paper reports are checked wherever both methods ran
     claims = {c["claim"] for c in metrics["paper_orderings"]}
     assert claims == {"sctdn ≥ template_only + 10 points (all levels)"}  # no vatmart_mod here
@@ -81,11 +92,12 @@ def test_metrics_contract_matches_the_trials_table(evaluated):
     assert "make seeds" in metrics["seeds"]["reason"]
 
 
-def _check_proposals(metrics, trials, n_proposals, n_pairs):
-    """vatmart: proposals run in order until one hangs the object (at most n_proposals); the
-    pair counts as hung if any did (success), its first proposal alone is success_single."""
-    rows = trials[trials["method"] == "vatmart"]
-    entry = metrics["vatmart"]
+def _check_proposals(metrics, trials, n_proposals, n_pairs, method):
+    """A proposing method: proposals run in order until one hangs the object (at most
+    n_proposals); the pair counts as hung if any did (success), its first proposal alone is
+    success_single."""
+    rows = trials[trials["method"] == method]
+    entry = metrics[method]
     assert entry["n_trials"] == n_pairs and entry["n_sim_runs"] == len(rows) >= n_pairs
     hung, first = [], []
     for _, g in rows.groupby(["support_id", "object_id"]):
