@@ -12,6 +12,8 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
   ``render_total_ms_per_view_median``: the whole view (ray casting, FPS to N, shuffle,
   NPZ write share), over the same sample of supports, one process;
 - ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded;
+- ``skt_flow_inference_ms_median``: skt_flow, batch 1, points in → ``sim_eval.n_proposals``
+  samples ordered by the cloud check (the first is the SKT it executes), model loaded;
 - ``cli_predict_ms_median``: ``skt predict``'s prediction of a 1000-point view (cleaning,
   sampling, SCTDN), model loaded, process start excluded;
 - ``sim_trials_per_min``: sim_eval trials (Panda; the oracle's and SCTDN's SKTs, every test
@@ -44,6 +46,7 @@ from skt_lib.config import LEVELS, load_params
 from skt_lib.eval.methods import load_models, method_for
 from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
 from skt_lib.io import read_npz, read_table, write_json_atomic
+from skt_lib.learning.flow import FlowPredictor
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
 from skt_lib.planning import bench as planner_bench
@@ -75,20 +78,34 @@ def render_bench(params, root: Path, per_level: int, tmp: Path) -> dict:
             "render_total_ms_per_view_median": float(np.median(total_ms))}
 
 
-def sctdn_bench(root: Path, n: int = 100, warmup: int = 10) -> dict:
-    """SCTDN inference, batch 1, N points in → SKT out, model loaded, one process; the median
-    of ``n`` predictions on different views after ``warmup`` untimed ones."""
-    predictor = SktPredictor.load(root / "train")
+def _median_ms(root: Path, predict, n: int = 100, warmup: int = 10) -> float:
+    """Median wall time (ms) of ``predict(cloud)`` over ``n`` different rendered views after
+    ``warmup`` untimed ones, one process."""
     clouds = [read_npz(f, RENDER_SPEC)["points"] for f in sorted((root / "render_views").glob("*.npz"))[:5]]
     views = [c[v] for c in clouds for v in range(0, c.shape[0], 2)][:n]
     for cloud in views[:warmup]:
-        predictor.predict(cloud)
+        predict(cloud)
     times = []
     for cloud in views:
         t0 = time.perf_counter()
-        predictor.predict(cloud)
+        predict(cloud)
         times.append(time.perf_counter() - t0)
-    return {"sctdn_inference_ms_median": 1000 * float(np.median(times))}
+    return 1000 * float(np.median(times))
+
+
+def sctdn_bench(root: Path) -> dict:
+    """SCTDN inference, batch 1, N points in → SKT out, model loaded."""
+    predictor = SktPredictor.load(root / "train")
+    return {"sctdn_inference_ms_median": _median_ms(root, predictor.predict)}
+
+
+def flow_bench(root: Path, n_samples: int, seed: int) -> dict:
+    """skt_flow inference, batch 1: N points in → ``n_samples`` samples ordered by the cloud
+    check, model loaded."""
+    predictor = FlowPredictor.load(root / "train_baselines" / "skt_flow")
+    rng = np.random.default_rng(seed)
+    return {"skt_flow_inference_ms_median":
+            _median_ms(root, lambda cloud: predictor.propose(cloud, rng, n_samples))}
 
 
 def cli_bench(root: Path) -> dict:
@@ -146,8 +163,8 @@ def sim_bench(params, root: Path, per_level: int) -> dict:
 
 
 #: The bench's parts, in the order they run, and the key prefixes each one writes.
-PARTS = ("rrt", "sctdn", "cli", "sim", "render", "imports")
-_PREFIXES = {"rrt": "rrt_", "sctdn": "sctdn_", "cli": "cli_", "sim": "sim_", "render": "render_",
+PARTS = ("rrt", "sctdn", "flow", "cli", "sim", "render", "imports")
+_PREFIXES = {"rrt": "rrt_", "sctdn": "sctdn_", "flow": "skt_flow_", "cli": "cli_", "sim": "sim_", "render": "render_",
              "imports": "import_"}
 
 
@@ -196,6 +213,7 @@ def main(argv=None) -> int:
     measure = {
         "rrt": lambda: rrt_bench(params, root, args.rrt_per_level, args.rrt_skts),
         "sctdn": lambda: sctdn_bench(root), "cli": lambda: cli_bench(root),
+        "flow": lambda: flow_bench(root, params.sim_eval.n_proposals, params.common.seed),
         "sim": lambda: sim_bench(params, root, args.per_level),
         "render": lambda: _in_tmp(lambda tmp: render_bench(params, root, args.per_level, tmp)),
         "imports": lambda: _in_tmp(lambda tmp: bench_dense_imports(Path(args.params), root, tmp))}
