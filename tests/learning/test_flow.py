@@ -218,3 +218,31 @@ def test_training_is_a_function_of_the_seed_and_selects_on_the_checked_sample():
     assert runs[2][1] == best
     assert best["val_best_of_n_l2_mm"] <= min(best["val_traj_l2_mm"], best["val_first_l2_mm"])
     assert 0.0 <= best["val_coverage_1cm"] <= 1.0
+
+
+def test_validation_scores_the_sample_the_cloud_check_picks():
+    """val_traj_l2_mm is the error of the sample ranked clearest in the view's own cloud,
+    recomputed here item by item (val_first_l2_mm: the first draw's)."""
+    from skt_lib.learning.train_baselines import VAL_LATENT_SEED, evaluate_flow
+
+    sup = _supports()
+    model = _model(seed=3, ctrl_std=(0.3,) * 12).eval()
+    model.end_point = lambda x, t, c: x  # no flow: a sample is its noise, centimetres apart
+    got = evaluate_flow(model, sup, views=(0, 1), n_samples=6, batch_size=3)
+    noise = torch.as_tensor(np.random.default_rng(VAL_LATENT_SEED).standard_normal((6, 12)),
+                            dtype=torch.float32)
+    checked, first = [], []
+    for s in sup:
+        for v in (0, 1):
+            b = make_batch([(s, v)])
+            with torch.no_grad():
+                enc = model.encode_cloud(b["xyz"])
+                traj = model.sample(noise, enc["cond"].expand(6, -1), enc["contact"].expand(6, -1))
+            m = traj.double().numpy() * float(b["scale"][0]) + b["centroid"][0].double().numpy()
+            err = [np.linalg.norm(x - s.skts, axis=-1).mean(-1).min() * 1000 for x in m]
+            scores = ring_penetrations(list(m), s.points[v].astype(np.float64))
+            checked.append(err[int(np.argmin(scores))])
+            first.append(err[0])
+    assert got["val_traj_l2_mm"] == pytest.approx(np.mean(checked), rel=1e-4)
+    assert got["val_first_l2_mm"] == pytest.approx(np.mean(first), rel=1e-4)
+    assert abs(np.mean(checked) - np.mean(first)) > 1.0  # the check chose other samples (mm)
