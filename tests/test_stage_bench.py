@@ -12,16 +12,19 @@ def test_bench_json_is_written_fresh(monkeypatch, tmp_path):
     out = tmp_path / "bench.json"
     out.write_text(json.dumps({"stale_key": 1.0, "rrt_plan_s_median": 99.0}))
     monkeypatch.setattr(bench, "load_params", lambda _: SimpleNamespace(
-        compute=SimpleNamespace(n_workers=2)))
+        compute=SimpleNamespace(n_workers=2), common=SimpleNamespace(seed=0),
+        sim_eval=SimpleNamespace(n_proposals=10)))
     monkeypatch.setattr(bench, "rrt_bench", lambda *a: {"rrt_plan_s_median": 1.0})
     monkeypatch.setattr(bench, "sctdn_bench", lambda *a: {"sctdn_inference_ms_median": 2.0})
+    monkeypatch.setattr(bench, "flow_bench", lambda *a: {"skt_flow_inference_ms_median": 7.0})
     monkeypatch.setattr(bench, "sim_bench", lambda *a: {"sim_trials_per_min": 3.0})
     monkeypatch.setattr(bench, "cli_bench", lambda *a: {"cli_predict_ms_median": 5.0})
     monkeypatch.setattr(bench, "render_bench", lambda *a: {"render_ms_per_view_median": 4.0})
     monkeypatch.setattr(bench, "bench_dense_imports", lambda *a: {"import_dense_s_median": 6.0})
     assert bench.main(["--out", str(out), "--data-root", str(tmp_path)]) == 0
     got = json.loads(out.read_text())
-    assert set(got) == {"rrt_plan_s_median", "sctdn_inference_ms_median", "sim_trials_per_min",
+    assert set(got) == {"rrt_plan_s_median", "sctdn_inference_ms_median",
+                        "skt_flow_inference_ms_median", "sim_trials_per_min",
                         "render_ms_per_view_median", "cli_predict_ms_median",
                         "import_dense_s_median", "machine", "parts_commit"}
     assert got["rrt_plan_s_median"] == 1.0
@@ -38,7 +41,8 @@ def test_bench_parts_replace_their_own_keys_and_keep_the_others(monkeypatch, tmp
         compute=SimpleNamespace(n_workers=2)))
     monkeypatch.setattr(bench, "_commit", lambda: "def")
     monkeypatch.setattr(bench, "sim_bench", lambda *a: {"sim_trials_per_min": 3.0})
-    for name in ("rrt_bench", "sctdn_bench", "cli_bench", "render_bench", "bench_dense_imports"):
+    for name in ("rrt_bench", "sctdn_bench", "flow_bench", "cli_bench", "render_bench",
+                 "bench_dense_imports"):
         monkeypatch.setattr(bench, name, lambda *a: pytest.fail("only sim was asked for"))
     assert bench.main(["--out", str(out), "--data-root", str(tmp_path), "--parts", "sim"]) == 0
     got = json.loads(out.read_text())

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from skt_lib.config import LEVELS, load_params
-from skt_lib.eval.methods import FALLS_BACK_TO_STORED, MODEL_OF, PROPOSING, load_models, \
+from skt_lib.eval.methods import FALLS_BACK_TO_STORED, MODEL_OF, PREDICTOR_OF, load_models, \
     make_method
 from skt_lib.eval.protocol import load_test_set, per_pair, predict_all, success_table, \
     trial_settings
@@ -37,7 +37,6 @@ from skt_lib.eval.stats import paired_comparisons, success_ci95
 from skt_lib.io import write_json_atomic
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.learning.sctdn import Sctdn
-from skt_lib.learning.vatmart import VatMartPredictor
 from skt_lib.seeding import item_rng
 from skt_lib.sim.execute import REASONS, run_trial
 from stages._common import run_items

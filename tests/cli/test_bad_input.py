@@ -135,7 +135,8 @@ ROWS = {
                                          "argument --proposals: expected a whole number from 1"),
     "--proposals with a method that does not propose": lambda t, d, v, p: (
         _hang(d, p, EASY_SUPPORT, OBJECT, "sctdn", "--proposals", "3"),
-        "--proposals goes with a proposing method (vatmart, vatmart_mod), not --method sctdn"),
+        "--proposals goes with a proposing method (vatmart, vatmart_mod, skt_flow), not "
+        "--method sctdn"),
     "--model with a method that runs no model": lambda t, d, v, p: (
         _hang(d, p, EASY_SUPPORT, OBJECT, "kpam", "--model", d / "train"),
         "--model goes with a learned method"),

@@ -60,7 +60,7 @@ def test_hang_runs_every_method_as_sim_eval_does(method, capsys, tmp_path, data_
         assert {k: got[k] for k in _row(trials, tid)} == _row(trials, tid), out
     if method in ("oracle", "oracle_floating"):  # the ground truth hangs on an easy support
         assert got["success"], out
-    if method in ("vatmart", "vatmart_mod"):
+    if method in ("vatmart", "vatmart_mod", "skt_flow"):
         assert "proposal 1 of 1" in got["fields"], out
     if method == "omnihang":
         assert any(f.startswith(("planned in", "no plan in")) for f in got["fields"]), out
@@ -137,4 +137,4 @@ def test_a_support_without_ground_truth(capsys, tmp_path, data_root, tiny_datase
     assert err.strip() == (f"ERROR: bare_hook: has no ground-truth SKT in {d / 'support.json'} "
                            "(no 'skts'); --method oracle is privileged (built from the ground "
                            "truth) and needs one; the learned methods (template_only, sctdn, "
-                           "sctdn_cp_feature, vatmart, vatmart_mod) do not")
+                           "sctdn_cp_feature, vatmart, vatmart_mod, skt_flow) do not")

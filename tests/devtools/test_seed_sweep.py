@@ -42,7 +42,8 @@ def test_extra_seeds_reach_table_i_through_sim_eval_on_the_tiny_dataset(tiny_eva
                  "--seeds", "2", "--scratch", str(scratch)]) == 0
     runs = json.loads((reports / "seeds" / "seed_runs.json").read_text())
     assert set(runs["seeds"]) == {"8"}  # common.seed 7 + 1
-    assert set(runs["seeds"]["8"]) == {"template_only", "sctdn", "vatmart", "vatmart@1"}
+    assert set(runs["seeds"]["8"]) == {"template_only", "sctdn", "vatmart", "vatmart@1",
+                                       "skt_flow", "skt_flow@1"}
 
     def evaluate() -> dict:
         args = ["--params", str(params), "--data-root", str(data), "--data-dir",
