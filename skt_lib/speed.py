@@ -1,0 +1,115 @@
+"""The measurements behind ``make bench`` (``stages/bench.py``, which says what each key
+means): rendering, batch-1 inference of SCTDN and skt_flow, and the executors on the same
+sim_eval trials. Not a stage's dependency: nothing here changes an artifact."""
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+
+from skt_lib.config import LEVELS
+from skt_lib.eval.methods import load_models, method_for
+from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
+from skt_lib.io import read_npz, read_table
+from skt_lib.learning.flow import FlowPredictor
+from skt_lib.learning.predictor import SktPredictor
+from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
+from skt_lib.schemas import SUPPORTS
+from skt_lib.sim.execute import EXECUTORS, TrialSettings, run_trial
+
+
+def render_bench(params, root: Path, per_level: int, tmp: Path) -> dict:
+    supports = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS)
+    chosen = [r for lv in LEVELS
+              for r in list(supports[supports["difficulty"] == lv].itertuples())[:per_level]]
+    render_ms, total_ms = [], []
+    for r in chosen:
+        task = RenderTask(r.support_id, str(root / "mesh_gen" / r.mesh_path),
+                          str(tmp / f"{r.support_id}.npz"), params.common.seed, params.render_views)
+        t0 = time.perf_counter()
+        out = render_support(task)
+        n_views = len(out["render_s"])
+        total_ms.append(1000 * (time.perf_counter() - t0) / n_views)
+        render_ms += [1000 * t for t in out["render_s"]]
+    return {"render_ms_per_view_median": float(np.median(render_ms)),
+            "render_total_ms_per_view_median": float(np.median(total_ms))}
+
+
+def _median_ms(root: Path, predict, n: int = 100, warmup: int = 10) -> float:
+    """Median wall time (ms) of ``predict(cloud)`` over ``n`` different rendered views after
+    ``warmup`` untimed ones, one process."""
+    clouds = [read_npz(f, RENDER_SPEC)["points"] for f in sorted((root / "render_views").glob("*.npz"))[:5]]
+    views = [c[v] for c in clouds for v in range(0, c.shape[0], 2)][:n]
+    for cloud in views[:warmup]:
+        predict(cloud)
+    times = []
+    for cloud in views:
+        t0 = time.perf_counter()
+        predict(cloud)
+        times.append(time.perf_counter() - t0)
+    return 1000 * float(np.median(times))
+
+
+def sctdn_bench(root: Path) -> dict:
+    """SCTDN inference, batch 1, N points in → SKT out, model loaded."""
+    predictor = SktPredictor.load(root / "train")
+    return {"sctdn_inference_ms_median": _median_ms(root, predictor.predict)}
+
+
+def flow_bench(root: Path, n_samples: int, seed: int) -> dict:
+    """skt_flow inference, batch 1: N points in → ``n_samples`` samples ordered by the cloud
+    check, model loaded."""
+    predictor = FlowPredictor.load(root / "train_baselines" / "skt_flow")
+    rng = np.random.default_rng(seed)
+    return {"skt_flow_inference_ms_median":
+            _median_ms(root, lambda cloud: predictor.propose(cloud, rng, n_samples))}
+
+
+#: The methods whose SKTs the executor bench runs: the ground truth (mostly hung) and the
+#: learned SKT (hung and failed by every reason), so that verdicts of both kinds are compared.
+SIM_BENCH_METHODS = ("oracle", "sctdn")
+
+
+def sim_bench(params, root: Path, per_level: int, run_items) -> dict:
+    """Every executor of :data:`~skt_lib.sim.execute.EXECUTORS` on the same trials (the SKTs
+    of :data:`SIM_BENCH_METHODS` on ``per_level`` test supports per level × every test object),
+    one after the other on ``compute.n_workers`` workers by ``run_items`` (the stages'
+    runner); each one's verdicts against the reference executor's."""
+    p = params.sim_eval
+    supports, objects, _ = load_test_set(root, params.clustering.T, params.common.seed,
+                                         p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg)
+    chosen = [s for lv in LEVELS for s in [s for s in supports if s.difficulty == lv][:per_level]]
+    models = load_models(root, SIM_BENCH_METHODS, params.clustering.T)
+    settings = trial_settings(p, params.contact_sim)
+    tasks = []
+    for m in SIM_BENCH_METHODS:
+        for s in chosen:
+            skt = method_for(m, s.support_id, s.gt, params, models).predict(s.cloud)
+            tasks += [make_task(m, s, o, skt.positions, settings,
+                                fallbacks=skt.fallbacks[:p.setup_fallbacks]) for o in objects]
+    verdicts, rates = {}, {}
+    for executor in EXECUTORS:
+        run = [dataclasses.replace(t, settings=dataclasses.replace(settings, executor=executor))
+               for t in tasks]
+        t0 = time.perf_counter()
+        results, _, _ = run_items(run_trial, run, params.compute, f"bench sim, {executor}")
+        rates[executor] = 60.0 * len(run) / (time.perf_counter() - t0)
+        verdicts[executor] = [(r["row"]["trial_id"], r["row"]["failure_reason"] or "success")
+                              for r in results]
+    default = TrialSettings.__dataclass_fields__["executor"].default
+    previous = EXECUTORS[EXECUTORS.index(default) - 1]
+    ref = verdicts["reference"]
+    out = {"sim_bench_trials": len(tasks), "sim_bench_executor": default,
+           "sim_bench_failures_reference": sum(v != "success" for _, v in ref),
+           "sim_trials_per_min": rates[default],
+           "sim_trials_per_min_previous": rates[previous],
+           "sim_trials_per_min_reference": rates["reference"],
+           "sim_speedup_vs_previous_executor": rates[default] / rates[previous],
+           "sim_speedup_vs_reference_executor": rates[default] / rates["reference"]}
+    for name, executor in (("", default), ("_previous", previous)):
+        differ = [f"{tid}: {a} → {b}" for (tid, a), (_, b) in zip(ref, verdicts[executor])
+                  if a != b]
+        out[f"sim_verdict_agreement{name}"] = 1.0 - len(differ) / len(ref)
+        out[f"sim_verdict_disagreements{name}"] = differ
+    return out
