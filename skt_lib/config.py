@@ -155,6 +155,7 @@ class RrtSktsParams(_Section):
     clearance_m: float = Field(ge=0.0, le=0.01, description="PyBullet distance the reference object keeps from support and wall.")
     probe_train_objects: bool = Field(description="Plan with the training objects beside the reference (docs/pipeline.md, rrt_skts).")
     penetration_tol_m: float = Field(ge=0.0, le=0.01, description="Deepest penetration allowed to a training object.")
+    train_objects_from_m: float = Field(ge=0.0, le=0.3, description="With probe_train_objects: the training objects are checked only where the keypoint lies at least this far from the hang (nearer, each object settles its own way and the reference alone decides).")
     goal_bias: float = Field(gt=0.0, lt=1.0, description="Share of tree samples drawn in the start region.")
     surface_bias: float = Field(ge=0.0, lt=1.0, description="Share of tree samples drawn near the support's surface.")
     route_bias: float = Field(ge=0.0, lt=1.0, description="Share of tree samples drawn near the hanging arm's threading route (from the mesh's skeleton: along the arm from the hang, over its tip and on past it).")

@@ -100,8 +100,10 @@ def write_report(rep: Path, params, metrics: dict, results: list[dict], supports
                 f"clear (penetration ≤ {sweep_tol_m * 1000:.0f} mm) "
                 f"{100 * (metrics['test_sweep_clear_rate'] or 0):.1f} %, median clearance "
                 f"{metrics['test_sweep_clearance_mm_median'] or 0:.1f} mm (capped at 6 mm). Test objects "
-                "take no part in planning" + (" ; training objects did (probe)." if p.probe_train_objects
-                                             else "; training objects did not either (docs/pipeline.md).")
+                "take no part in planning" + (
+                    f"; training objects did (probe), where the keypoint lies "
+                    f"{p.train_objects_from_m * 1000:.0f} mm or more from the hang (docs/pipeline.md)."
+                    if p.probe_train_objects else "; training objects did not either (docs/pipeline.md).")
                 + f" The oracles of sim_eval choose among all {p.n_skts_per_test_support} SKTs planned "
                 "for a test support, those whose sweep of the object is clear first (docs/evaluation.md); "
                 "this figure is the first SKT's alone.")

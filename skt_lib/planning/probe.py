@@ -42,21 +42,31 @@ def add_probe(world: World, objects: list[ProbeObject]) -> int:
 
 
 def make_probe_collision_fn(world: World, probe: int, obstacles: list[int], clearance: float,
-                            tolerance: float):
+                            tolerance: float, hang: np.ndarray | None = None,
+                            others_from_m: float = 0.0):
     """``fn(position, quat) -> True`` when, with the probe's keypoint frame there (support
     frame), its first object (the reference) comes within ``clearance`` of any of
     ``obstacles``, or any other object penetrates one deeper than ``tolerance`` (PyBullet
     signed distances, m). Shallow penetrations of objects that did not shape the hang are
-    resolved by contact in simulation (measured: test-object sweeps within 3 mm all hung)."""
+    resolved by contact in simulation (measured: test-object sweeps within 3 mm all hung).
+
+    With ``hang`` (the hanging keypoint position, support frame), the other objects are
+    checked only where the keypoint lies at least ``others_from_m`` from it: near the hang
+    each object settles its own way (a mug's body reaches the wall plate where the ring hangs
+    free), so there the reference alone decides."""
     cid = world.cid
     support_pq = tuple(map(tuple, matrix_pose(SUPPORT_POSE_WORLD)))
+    near_sq = others_from_m ** 2 if hang is not None else -1.0
+    hang = np.zeros(3) if hang is None else np.asarray(hang, float)
 
     def collides(position, quat) -> bool:
         """``position`` (3,) and xyzw ``quat`` of the keypoint frame, support frame."""
         pos, orn = pb.multiplyTransforms(*support_pq, position, quat)
         pb.resetBasePositionAndOrientation(probe, pos, orn, physicsClientId=cid)
+        d = np.subtract(position, hang)
+        only_reference = {"linkIndexA": 0} if float(d @ d) < near_sq else {}
         for o in obstacles:
-            for c in pb.getClosestPoints(probe, o, clearance, physicsClientId=cid):
+            for c in pb.getClosestPoints(probe, o, clearance, physicsClientId=cid, **only_reference):
                 if c[3] == 0 or c[8] < -tolerance:
                     return True
         return False

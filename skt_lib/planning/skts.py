@@ -222,15 +222,17 @@ def _plan(task: SktTask, goal, n: int, in_start, sample_start, lower, upper, col
 
 
 def plan_support_skts(task: SktTask) -> dict:
-    """All SKTs of one support (its own generator and PyBullet client)."""
+    """All SKTs of one support (its own generator and PyBullet client). With
+    ``probe_train_objects``, planned for the reference and the training objects (the latter
+    away from the hang); where that leaves the support without any SKT (a tall tip no mug
+    clears from the start region), planned again for the reference alone (``probe`` in the
+    result says which)."""
     p = task.params
     rng = item_rng(task.seed, "rrt_skts", task.support_id)
     ref_kp = _kp(task.reference)
     goal = pose_matrix(task.goal_position, task.goal_quat) @ ref_kp  # hanging keypoint frame
     (support_mesh,) = read_obj(task.support_mesh)
     ref_mesh = read_obj(task.reference.mesh)[0]
-    probe_objs = (task.reference, *(task.train_objects if p.probe_train_objects else ()))
-    radius = max(_radius(read_obj(o.mesh)[0], _kp(o)) for o in probe_objs)
     ref_radius = _radius(ref_mesh, ref_kp)
     checker = MeshClearance(support_mesh, ref_mesh, p.recheck_spacing_m)
     k_goal = goal[:3, 3]
@@ -239,7 +241,6 @@ def plan_support_skts(task: SktTask) -> dict:
     corners = np.vstack([support_mesh.vertices, k_goal + lo_off, k_goal + hi_off])
     lower, upper = corners.min(0) - BOUNDS_MARGIN_M, corners.max(0) + BOUNDS_MARGIN_M
     lower[0] = max(lower[0], 0.0)
-    settings = thread_settings(p, radius, task.T)
     near = surface_sampler(support_mesh, p.surface_offset_m)
     route = (route_sampler(arm_route(support_mesh, k_goal, ROUTE_BEYOND_M), p.route_spread_m)
              if p.route_bias > 0 else None)
@@ -250,34 +251,25 @@ def plan_support_skts(task: SktTask) -> dict:
     def sample_start(g: np.random.Generator) -> np.ndarray:
         return k_goal + g.uniform(lo_off, hi_off)
 
-    skts, failures, plan_s, recheck_s, sweeps = [], Counter(), [], [], []
-    n_planned = n_recheck_ok = 0
-    with World(dt=1 / 240, solver_iterations=1, with_floor=False) as world:
-        wall = world.add_wall()
-        sup = world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5)
-        probe = add_probe(world, [ProbeObject(o.collision, o.keypoint) for o in probe_objs])
-        collides = make_probe_collision_fn(world, probe, [sup, wall], p.clearance_m, p.penetration_tol_m)
+    def plan_with(world: World, obstacles: list[int], objs: tuple[SktObject, ...]) -> dict:
+        """Plan and re-check every attempt with ``objs`` in the probe."""
+        probe = add_probe(world, [ProbeObject(o.collision, o.keypoint) for o in objs])
+        collides = make_probe_collision_fn(world, probe, obstacles, p.clearance_m, p.penetration_tol_m,
+                                           k_goal if len(objs) > 1 else None, p.train_objects_from_m)
+        settings = thread_settings(p, max(_radius(read_obj(o.mesh)[0], _kp(o)) for o in objs), task.T)
         attempts = _plan(task, goal, n_attempts(p, task.split), in_start, sample_start, lower, upper,
                          collides, settings, rng, k_goal + (lo_off + hi_off) / 2,
                          (k_goal + lo_off, k_goal + hi_off), near, route)
-        for index, path, reason, seconds, n_checks in attempts:
-            plan_s.append(seconds)
-            if path is None:
-                failures[reason] += 1
-                continue
-            n_planned += 1
-            dense = densify(path, p.dense_step_m)  # the same polyline: resampling is unchanged
-            t1 = time.perf_counter()
-            executed = executed_path(resample(dense, task.T), p.recheck_step_m, ref_radius)
-            clearance = sweep_clearance(checker, executed, ref_kp, p.recheck_step_m)
-            recheck_s.append(time.perf_counter() - t1)
-            if clearance <= 0.0:
-                failures["recheck_collision"] += 1
-                continue
-            n_recheck_ok += 1
-            poses = executed @ invert(ref_kp)  # the reference object as executed, start first
-            skts.append({"index": index, "keypoints": dense, "poses": poses[::-1], "n_checks": n_checks,
-                         "min_clearance_m": clearance})
+        return _recheck(attempts, checker, ref_kp, ref_radius, p, task.T)
+
+    objs = (task.reference, *(task.train_objects if p.probe_train_objects else ()))
+    with World(dt=1 / 240, solver_iterations=1, with_floor=False) as world:
+        wall = world.add_wall()
+        obstacles = [world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5), wall]
+        out = plan_with(world, obstacles, objs) | {"probe": "objects" if len(objs) > 1 else "reference"}
+        if not out["skts"] and len(objs) > 1:
+            out = plan_with(world, obstacles, objs[:1]) | {"probe": "reference"}
+    skts, sweeps = out["skts"], []
     if task.split == "test" and skts:  # how objects that made no label fare along the oracle SKT
         waypoints = resample(skts[0]["keypoints"], task.T)
         for o in task.test_objects:
@@ -285,6 +277,33 @@ def plan_support_skts(task: SktTask) -> dict:
             frames = executed_path(waypoints, p.recheck_step_m, _radius(mesh, kp))
             sweeps.append({"object_id": o.object_id, "clearance_m": sweep_clearance(
                 MeshClearance(support_mesh, mesh, p.recheck_spacing_m), frames, kp, p.recheck_step_m)})
-    return {"support_id": task.support_id, "skts": skts, "failures": dict(failures),
-            "plan_s": plan_s, "recheck_s": recheck_s, "n_planned": n_planned,
-            "n_recheck_ok": n_recheck_ok, "n_attempted": n_attempts(p, task.split), "test_sweeps": sweeps}
+    return out | {"support_id": task.support_id, "n_attempted": n_attempts(p, task.split),
+                  "test_sweeps": sweeps}
+
+
+def _recheck(attempts, checker: MeshClearance, ref_kp: np.ndarray, ref_radius: float,
+             p: RrtSktsParams, T: int) -> dict:
+    """The planned attempts re-checked independently, as executed: ``{"skts", "failures",
+    "plan_s", "recheck_s", "n_planned", "n_recheck_ok"}``."""
+    skts, failures, plan_s, recheck_s = [], Counter(), [], []
+    n_planned = n_recheck_ok = 0
+    for index, path, reason, seconds, n_checks in attempts:
+        plan_s.append(seconds)
+        if path is None:
+            failures[reason] += 1
+            continue
+        n_planned += 1
+        dense = densify(path, p.dense_step_m)  # the same polyline: resampling is unchanged
+        t1 = time.perf_counter()
+        executed = executed_path(resample(dense, T), p.recheck_step_m, ref_radius)
+        clearance = sweep_clearance(checker, executed, ref_kp, p.recheck_step_m)
+        recheck_s.append(time.perf_counter() - t1)
+        if clearance <= 0.0:
+            failures["recheck_collision"] += 1
+            continue
+        n_recheck_ok += 1
+        poses = executed @ invert(ref_kp)  # the reference object as executed, start first
+        skts.append({"index": index, "keypoints": dense, "poses": poses[::-1], "n_checks": n_checks,
+                     "min_clearance_m": clearance})
+    return {"skts": skts, "failures": dict(failures), "plan_s": plan_s, "recheck_s": recheck_s,
+            "n_planned": n_planned, "n_recheck_ok": n_recheck_ok}

@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from skt_lib.config import load_params
-from skt_lib.geometry.export import read_obj
+from skt_lib.geometry.convex import box
+from skt_lib.geometry.export import read_obj, write_shape
 from skt_lib.geometry.se3 import invert, pose_matrix
 from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
-from skt_lib.planning.skts import REACH_TOL_M, load_skt_tasks, plan_support_skts
+from skt_lib.planning.skts import REACH_TOL_M, SktObject, load_skt_tasks, plan_support_skts
 from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 
@@ -80,3 +81,26 @@ def test_test_supports_get_more_skts_with_the_same_first_ones(tiny_dataset):
     assert one["skts"], "the tiny support should get an SKT"
     np.testing.assert_array_equal(test["skts"][0]["keypoints"], one["skts"][0]["keypoints"])
     np.testing.assert_array_equal(train["skts"][0]["keypoints"], one["skts"][0]["keypoints"])
+
+
+def test_a_support_no_training_object_clears_is_planned_for_the_reference_alone(tiny_dataset, tmp_path):
+    """With the training objects in the probe, a support none of their paths clears falls back
+    to the reference alone: the same SKTs as planning without them (the failed pass draws
+    nothing from the support's generator: its lead-in is blocked before the tree grows)."""
+    params, data, _ = tiny_dataset
+    p = load_params(params)
+    task = next(t for t in load_skt_tasks(data, p.common.seed, p.rrt_skts, p.clustering.T))
+    cube = box([0.0, 0.0, 0.0], [0.25, 0.25, 0.25])  # swallows support and wall wherever it goes
+    write_shape(tmp_path / "cube", "cube", cube, [cube], 1.0, [0, 0, 0], np.eye(3) * 1e-3, (0, 1, 0, 1))
+    blocker = SktObject("cube", str(tmp_path / "cube" / "visual.obj"),
+                        str(tmp_path / "cube" / "collision.obj"), tuple(np.eye(4).ravel()))
+    plain = plan_support_skts(task)
+    assert plain["probe"] == "reference" and plain["skts"]
+    with_objects = dataclasses.replace(task, train_objects=(blocker,), params=task.params.model_copy(
+        update={"probe_train_objects": True, "train_objects_from_m": 0.0, "penetration_tol_m": 0.0}))
+    got = plan_support_skts(with_objects)
+    assert got["probe"] == "reference"
+    assert [s["index"] for s in got["skts"]] == [s["index"] for s in plain["skts"]]
+    for a, b in zip(got["skts"], plain["skts"]):
+        np.testing.assert_array_equal(a["keypoints"], b["keypoints"])
+    assert got["failures"] == plain["failures"]  # the failed pass is not counted twice
