@@ -7,13 +7,16 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import open3d as o3d
 from tqdm import tqdm
 
 from skt_lib.errors import DataError, InputError
-from skt_lib.learning.predictor import SktPredictor
+
+if TYPE_CHECKING:
+    from skt_lib.learning.predictor import SktPredictor
 
 EXIT_BAD_INPUT = 2
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy", ".npz", ".xyz", ".txt")
@@ -97,7 +100,9 @@ def read_frame(path: str | Path) -> np.ndarray:
     return t
 
 
-def load_predictor(model_dir: str | Path) -> SktPredictor:
+def load_predictor(model_dir: str | Path) -> "SktPredictor":
+    from skt_lib.learning.predictor import SktPredictor  # PyTorch: only where a model is loaded
+
     d = Path(model_dir)
     if not d.is_dir():
         raise InputError(f"{d}: no such model folder (train one with `dvc repro train`)")

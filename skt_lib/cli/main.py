@@ -7,6 +7,7 @@ written to a temporary file and renamed into place once complete.
 """
 
 import argparse
+import importlib
 import sys
 import traceback
 from collections.abc import Sequence
@@ -16,7 +17,6 @@ from skt_lib.quiet import import_quietly
 # before any command module imports it: PyBullet's banner goes to nowhere (stderr with --debug)
 import_quietly("pybullet", to_stderr="--debug" in sys.argv)
 
-from skt_lib.cli import hang, import_mesh, import_support, predict  # noqa: E402
 from skt_lib.cli.common import EXIT_BAD_INPUT  # noqa: E402
 from skt_lib.errors import SktError  # noqa: E402
 
@@ -34,20 +34,28 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(EXIT_BAD_INPUT)
 
 
-def build_parser() -> argparse.ArgumentParser:
+#: Each subcommand and the module that defines it, in ``--help`` order. A run imports only
+#: its own command's module: an import needs neither PyTorch nor the evaluation's modules.
+COMMANDS = {"predict": "predict", "import-object": "import_mesh", "import-support": "import_support",
+            "hang": "hang"}
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``command`` alone, or of every subcommand (``None``, or not one)."""
     ap = _Parser(prog="skt", description="Semantic keypoint trajectories: predict, import, hang.",
                  epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--debug", action="store_true", help="show tracebacks of expected errors")
     sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
-    for module in (predict, import_mesh, import_support, hang):
-        module.add_parser(sub)
+    for name in [COMMANDS[command]] if command in COMMANDS else COMMANDS.values():
+        importlib.import_module(f"skt_lib.cli.{name}").add_parser(sub)
     for p in sub.choices.values():
         p.formatter_class = argparse.RawDescriptionHelpFormatter
     return ap
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(next((a for a in argv if not a.startswith("-")), None)).parse_args(argv)
     try:
         return args.run(args)
     except SktError as err:
