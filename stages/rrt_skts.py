@@ -107,9 +107,9 @@ def main(argv=None) -> int:
         "failures_by_reason": dict(sorted((failures + Counter(
             {"off_hang": n_off_hang} if n_off_hang else {})).items())),
         "n_supports_crashed": len(crashed),
-        # supports the objects' probe left without an SKT, planned for the reference alone
-        "n_supports_object_probe_fallback": sum(r["probe"] == "reference" for r in results)
-        if p.probe_train_objects else 0,
+        # attempts the training objects' checks left without an SKT, planned for the reference alone
+        "n_supports_object_probe_fallback": sum(r["n_reference_fill"] > 0 for r in results),
+        "n_attempts_reference_fill": sum(r["n_reference_fill"] for r in results),
         "crashes_by_reason": dict(sorted(crash_counts.items())),
         "test_sweep_clear_rate": float(np.mean([c >= -SWEEP_TOL_M for c in sweeps])) if sweeps else None,
         "test_sweep_n_pairs": len(sweeps),

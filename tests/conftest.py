@@ -40,7 +40,7 @@ TINY = {
                  "ik_restarts": 4, "grasp_force_n": 60.0, "retreat_m": 0.08, "retreat_steps": 60,
                  "kpam_pre_hang_m": [0.1, 0.0, 0.0], "kpam_lift_m": 0.01,
                  "n_record": 1, "record_every": 16},
-    "rrt_skts": {'n_skts_per_support': 1, 'n_skts_per_test_support': 1, 'planner': 'one_tree', 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'step_m': 0.01, 'max_turn_deg': 35.0, 'lead_in_m': 0.01, 'max_release_offset_m': 0.004, 'check_step_m': 0.0025, 'clearance_m': 0.0005, 'probe_train_objects': False, 'penetration_tol_m': 0.005, 'train_objects_from_m': 0.03, 'goal_bias': 0.2, 'surface_bias': 0.2, 'surface_offset_m': 0.015, 'route_bias': 0.2, 'route_spread_m': 0.003, 'plane_bias': 0.6, 'max_checks': 15000, 'shortcut_steps': 10, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
+    "rrt_skts": {'n_skts_per_support': 1, 'n_skts_per_test_support': 1, 'planner': 'one_tree', 'start_dx_m': [0.08, 0.16], 'start_dy_m': 0.05, 'start_dz_m': [0.0, 0.1], 'step_m': 0.01, 'max_turn_deg': 35.0, 'lead_in_m': 0.01, 'max_release_offset_m': 0.004, 'check_step_m': 0.0025, 'clearance_m': 0.0005, 'probe_train_objects': False, 'penetration_tol_m': 0.005, 'wall_train_objects': True, 'wall_from_m': 0.01, 'train_objects_from_m': 0.03, 'goal_bias': 0.2, 'surface_bias': 0.2, 'surface_offset_m': 0.015, 'route_bias': 0.2, 'route_spread_m': 0.003, 'plane_bias': 0.6, 'max_checks': 15000, 'shortcut_steps': 10, 'dense_step_m': 0.001, 'recheck_spacing_m': 0.002, 'recheck_step_m': 0.001},
 }
 
 

@@ -102,8 +102,14 @@ def write_report(rep: Path, params, metrics: dict, results: list[dict], supports
                 f"{metrics['test_sweep_clearance_mm_median'] or 0:.1f} mm (capped at 6 mm). Test objects "
                 "take no part in planning" + (
                     f"; training objects did (probe), where the keypoint lies "
-                    f"{p.train_objects_from_m * 1000:.0f} mm or more from the hang (docs/pipeline.md)."
-                    if p.probe_train_objects else "; training objects did not either (docs/pipeline.md).")
+                    f"{p.train_objects_from_m * 1000:.0f} mm or more from the hang"
+                    if p.probe_train_objects else "; training objects were not in the probe") + (
+                    f", and were kept off the wall plane from {p.wall_from_m * 1000:.0f} mm from the "
+                    "hang on" if p.wall_train_objects else "") + (
+                    f" ({metrics['n_attempts_reference_fill']} attempts on "
+                    f"{metrics['n_supports_object_probe_fallback']} supports left without an SKT by "
+                    "them, planned again for the reference alone; docs/pipeline.md)."
+                    if p.probe_train_objects or p.wall_train_objects else " (docs/pipeline.md).")
                 + f" The oracles of sim_eval choose among all {p.n_skts_per_test_support} SKTs planned "
                 "for a test support, those whose sweep of the object is clear first (docs/evaluation.md); "
                 "this figure is the first SKT's alone.")

@@ -29,7 +29,7 @@ from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import invert, pose_matrix
 from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
-from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn
+from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn, wall_points
 from skt_lib.planning.route import arm_route, route_sampler
 from skt_lib.planning.threading import (ThreadingFailed, ThreadSettings, densify, plan_threading,
                                         plan_threading_many)
@@ -224,9 +224,12 @@ def _plan(task: SktTask, goal, n: int, in_start, sample_start, lower, upper, col
 def plan_support_skts(task: SktTask) -> dict:
     """All SKTs of one support (its own generator and PyBullet client). With
     ``probe_train_objects``, planned for the reference and the training objects (the latter
-    away from the hang); where that leaves the support without any SKT (a tall tip no mug
-    clears from the start region), planned again for the reference alone (``probe`` in the
-    result says which)."""
+    away from the hang); with ``wall_train_objects``, the training objects are kept off the
+    wall plane (away from the hang) whether or not they are in the probe. Attempts these
+    checks leave without an SKT (a tall tip no mug clears from the start region, a curl a long
+    utensil cannot follow off the wall) are planned again for the reference alone
+    (:func:`fill_failed`): ``n_reference_fill`` in the result counts them, and ``probe``
+    names the probe that planned the support's SKTs ("reference" where every one was)."""
     p = task.params
     rng = item_rng(task.seed, "rrt_skts", task.support_id)
     ref_kp = _kp(task.reference)
@@ -251,24 +254,31 @@ def plan_support_skts(task: SktTask) -> dict:
     def sample_start(g: np.random.Generator) -> np.ndarray:
         return k_goal + g.uniform(lo_off, hi_off)
 
-    def plan_with(world: World, obstacles: list[int], objs: tuple[SktObject, ...]) -> dict:
-        """Plan and re-check every attempt with ``objs`` in the probe."""
+    def attempts_with(world: World, obstacles: list[int], objs: tuple[SktObject, ...], wall) -> list:
+        """Every attempt planned with ``objs`` in the probe and ``wall`` points
+        (:func:`wall_points`) kept off the wall."""
         probe = add_probe(world, [ProbeObject(o.collision, o.keypoint) for o in objs])
+        gated = len(objs) > 1 or wall is not None
         collides = make_probe_collision_fn(world, probe, obstacles, p.clearance_m, p.penetration_tol_m,
-                                           k_goal if len(objs) > 1 else None, p.train_objects_from_m)
+                                           k_goal if gated else None, p.train_objects_from_m, wall,
+                                           p.wall_from_m)
         settings = thread_settings(p, max(_radius(read_obj(o.mesh)[0], _kp(o)) for o in objs), task.T)
-        attempts = _plan(task, goal, n_attempts(p, task.split), in_start, sample_start, lower, upper,
-                         collides, settings, rng, k_goal + (lo_off + hi_off) / 2,
-                         (k_goal + lo_off, k_goal + hi_off), near, route)
-        return _recheck(attempts, checker, ref_kp, ref_radius, p, task.T)
+        return list(_plan(task, goal, n_attempts(p, task.split), in_start, sample_start, lower, upper,
+                          collides, settings, rng, k_goal + (lo_off + hi_off) / 2,
+                          (k_goal + lo_off, k_goal + hi_off), near, route))
 
     objs = (task.reference, *(task.train_objects if p.probe_train_objects else ()))
+    wall = (wall_points([(read_obj(o.mesh)[0], _kp(o)) for o in task.train_objects])
+            if p.wall_train_objects and task.train_objects else None)
+    probe = "+".join(["objects" if len(objs) > 1 else "reference", *(["wall"] if wall is not None else [])])
+    n_fill = 0
     with World(dt=1 / 240, solver_iterations=1, with_floor=False) as world:
-        wall = world.add_wall()
-        obstacles = [world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5), wall]
-        out = plan_with(world, obstacles, objs) | {"probe": "objects" if len(objs) > 1 else "reference"}
-        if not out["skts"] and len(objs) > 1:
-            out = plan_with(world, obstacles, objs[:1]) | {"probe": "reference"}
+        obstacles = [world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5), world.add_wall()]
+        attempts = attempts_with(world, obstacles, objs, wall)
+        if probe != "reference" and any(a[1] is None for a in attempts):
+            attempts, n_fill = fill_failed(attempts, attempts_with(world, obstacles, objs[:1], None))
+    out = _recheck(attempts, checker, ref_kp, ref_radius, p, task.T) | {
+        "probe": "reference" if n_fill == len(attempts) else probe, "n_reference_fill": n_fill}
     skts, sweeps = out["skts"], []
     if task.split == "test" and skts:  # how objects that made no label fare along the oracle SKT
         waypoints = resample(skts[0]["keypoints"], task.T)
@@ -279,6 +289,18 @@ def plan_support_skts(task: SktTask) -> dict:
                 MeshClearance(support_mesh, mesh, p.recheck_spacing_m), frames, kp, p.recheck_step_m)})
     return out | {"support_id": task.support_id, "n_attempted": n_attempts(p, task.split),
                   "test_sweeps": sweeps}
+
+
+def fill_failed(attempts: list, fallback: list) -> tuple[list, int]:
+    """(``attempts``' SKTs, then each failed attempt *i* (no path) replaced by ``fallback``'s
+    *i*, as attempt ``n + i`` of ``n`` — after every SKT of the stricter pass, so that the
+    lowest ``skt_index`` (the oracle's first choice) is one of those — with the failed
+    attempt's seconds and checks added; how many were replaced)."""
+    n = len(attempts)
+    kept = [a for a in attempts if a[1] is not None]
+    filled = [(n + a[0], f[1], f[2], a[3] + f[3], a[4] + f[4])
+              for a, f in zip(attempts, fallback, strict=True) if a[1] is None]
+    return kept + filled, len(filled)
 
 
 def _recheck(attempts, checker: MeshClearance, ref_kp: np.ndarray, ref_radius: float,

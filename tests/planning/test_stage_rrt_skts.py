@@ -12,7 +12,7 @@ from skt_lib.geometry.export import read_obj, write_shape
 from skt_lib.geometry.se3 import invert, pose_matrix
 from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
-from skt_lib.planning.skts import REACH_TOL_M, SktObject, load_skt_tasks, plan_support_skts
+from skt_lib.planning.skts import REACH_TOL_M, SktObject, fill_failed, load_skt_tasks, plan_support_skts
 from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 
@@ -83,10 +83,16 @@ def test_test_supports_get_more_skts_with_the_same_first_ones(tiny_dataset):
     np.testing.assert_array_equal(train["skts"][0]["keypoints"], one["skts"][0]["keypoints"])
 
 
-def test_a_support_no_training_object_clears_is_planned_for_the_reference_alone(tiny_dataset, tmp_path):
-    """With the training objects in the probe, a support none of their paths clears falls back
-    to the reference alone: the same SKTs as planning without them (the failed pass draws
-    nothing from the support's generator: its lead-in is blocked before the tree grows)."""
+@pytest.mark.parametrize("checks", [
+    {"probe_train_objects": True, "train_objects_from_m": 0.0, "penetration_tol_m": 0.0,
+     "wall_train_objects": False},
+    {"probe_train_objects": False, "wall_train_objects": True, "wall_from_m": 0.0}],
+    ids=["in the probe", "off the wall"])
+def test_a_support_no_training_object_clears_is_planned_for_the_reference_alone(tiny_dataset, tmp_path, checks):
+    """With the training objects in the probe, or kept off the wall, a support none of their
+    paths clears falls back to the reference alone: the same SKTs as planning without them
+    (the failed pass draws nothing from the support's generator: its lead-in is blocked
+    before the tree grows)."""
     params, data, _ = tiny_dataset
     p = load_params(params)
     task = next(t for t in load_skt_tasks(data, p.common.seed, p.rrt_skts, p.clustering.T))
@@ -94,13 +100,29 @@ def test_a_support_no_training_object_clears_is_planned_for_the_reference_alone(
     write_shape(tmp_path / "cube", "cube", cube, [cube], 1.0, [0, 0, 0], np.eye(3) * 1e-3, (0, 1, 0, 1))
     blocker = SktObject("cube", str(tmp_path / "cube" / "visual.obj"),
                         str(tmp_path / "cube" / "collision.obj"), tuple(np.eye(4).ravel()))
-    plain = plan_support_skts(task)
+    plain = plan_support_skts(dataclasses.replace(task, params=task.params.model_copy(
+        update={"probe_train_objects": False, "wall_train_objects": False})))
     assert plain["probe"] == "reference" and plain["skts"]
-    with_objects = dataclasses.replace(task, train_objects=(blocker,), params=task.params.model_copy(
-        update={"probe_train_objects": True, "train_objects_from_m": 0.0, "penetration_tol_m": 0.0}))
+    with_objects = dataclasses.replace(task, train_objects=(blocker,),
+                                       params=task.params.model_copy(update=checks))
     got = plan_support_skts(with_objects)
     assert got["probe"] == "reference"
-    assert [s["index"] for s in got["skts"]] == [s["index"] for s in plain["skts"]]
+    n = len(got["plan_s"])  # every attempt planned again, as attempt n + i
+    assert [s["index"] - n for s in got["skts"]] == [s["index"] for s in plain["skts"]]
     for a, b in zip(got["skts"], plain["skts"]):
         np.testing.assert_array_equal(a["keypoints"], b["keypoints"])
     assert got["failures"] == plain["failures"]  # the failed pass is not counted twice
+    assert got["n_reference_fill"] == len(got["plan_s"]) and plain["n_reference_fill"] == 0
+
+
+def test_fill_failed_replaces_only_the_failed_attempts_and_keeps_their_cost():
+    path = np.zeros((3, 3))
+    strict = [(0, path, None, 1.0, 10), (1, None, "no_path", 2.0, 20), (2, None, "stuck", 0.5, 5)]
+    fallback = [(0, path + 1, None, 3.0, 30), (1, path + 2, None, 4.0, 40), (2, None, "no_path", 1.0, 7)]
+    got, n = fill_failed(strict, fallback)
+    assert n == 2 and len(got) == 3
+    assert got[0] is strict[0]  # a strict SKT is kept as it is, first
+    assert got[1][:3] == (4, fallback[1][1], None) and got[1][3:] == (6.0, 60)  # attempt 3 + 1
+    assert got[2] == (5, None, "no_path", 1.5, 12)  # failed both ways: the fallback's reason
+    with pytest.raises(ValueError):
+        fill_failed(strict, fallback[:2])
