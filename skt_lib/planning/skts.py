@@ -192,13 +192,13 @@ def start_points(n: int, centre: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> 
 
 
 def _plan(task: SktTask, goal, n: int, in_start, sample_start, lower, upper, collides, settings,
-          rng, centre, box, near, route):
+          rng, centre, box, near, route, only: list[int] | None = None):
     """``(index, dense SKT | None, failure reason | None, plan seconds, pose checks)`` for SKT
     attempts ``0 … n − 1``, by ``task.params.planner``: one tree for all (each to its own
     start; SKT 0's seconds and checks include the tree's threading) or a fresh search each
-    (each to ``centre``)."""
+    (each to ``centre``; with ``only``, just those attempts — one tree serves all anyway)."""
     if task.params.planner == "per_skt":
-        for index in range(n):
+        for index in range(n) if only is None else only:
             t0 = time.perf_counter()
             try:
                 dense, checks = plan_threading(goal, in_start, sample_start, lower, upper,
@@ -254,9 +254,10 @@ def plan_support_skts(task: SktTask) -> dict:
     def sample_start(g: np.random.Generator) -> np.ndarray:
         return k_goal + g.uniform(lo_off, hi_off)
 
-    def attempts_with(world: World, obstacles: list[int], objs: tuple[SktObject, ...], wall) -> list:
-        """Every attempt planned with ``objs`` in the probe and ``wall`` points
-        (:func:`wall_points`) kept off the wall."""
+    def attempts_with(world: World, obstacles: list[int], objs: tuple[SktObject, ...], wall,
+                      only: list[int] | None = None) -> list:
+        """The attempts (``only`` those, where the planner can) planned with ``objs`` in the
+        probe and ``wall`` points (:func:`wall_points`) kept off the wall."""
         probe = add_probe(world, [ProbeObject(o.collision, o.keypoint) for o in objs])
         gated = len(objs) > 1 or wall is not None
         collides = make_probe_collision_fn(world, probe, obstacles, p.clearance_m, p.penetration_tol_m,
@@ -265,7 +266,7 @@ def plan_support_skts(task: SktTask) -> dict:
         settings = thread_settings(p, max(_radius(read_obj(o.mesh)[0], _kp(o)) for o in objs), task.T)
         return list(_plan(task, goal, n_attempts(p, task.split), in_start, sample_start, lower, upper,
                           collides, settings, rng, k_goal + (lo_off + hi_off) / 2,
-                          (k_goal + lo_off, k_goal + hi_off), near, route))
+                          (k_goal + lo_off, k_goal + hi_off), near, route, only))
 
     objs = (task.reference, *(task.train_objects if p.probe_train_objects else ()))
     wall = (wall_points([(read_obj(o.mesh)[0], _kp(o)) for o in task.train_objects])
@@ -275,8 +276,9 @@ def plan_support_skts(task: SktTask) -> dict:
     with World(dt=1 / 240, solver_iterations=1, with_floor=False) as world:
         obstacles = [world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5), world.add_wall()]
         attempts = attempts_with(world, obstacles, objs, wall)
-        if probe != "reference" and any(a[1] is None for a in attempts):
-            attempts, n_fill = fill_failed(attempts, attempts_with(world, obstacles, objs[:1], None))
+        failed = [a[0] for a in attempts if a[1] is None]
+        if probe != "reference" and failed:
+            attempts, n_fill = fill_failed(attempts, attempts_with(world, obstacles, objs[:1], None, failed))
     out = _recheck(attempts, checker, ref_kp, ref_radius, p, task.T) | {
         "probe": "reference" if n_fill == len(attempts) else probe, "n_reference_fill": n_fill}
     skts, sweeps = out["skts"], []
@@ -293,13 +295,14 @@ def plan_support_skts(task: SktTask) -> dict:
 
 def fill_failed(attempts: list, fallback: list) -> tuple[list, int]:
     """(``attempts``' SKTs, then each failed attempt *i* (no path) replaced by ``fallback``'s
-    *i*, as attempt ``n + i`` of ``n`` — after every SKT of the stricter pass, so that the
-    lowest ``skt_index`` (the oracle's first choice) is one of those — with the failed
-    attempt's seconds and checks added; how many were replaced)."""
-    n = len(attempts)
+    attempt *i* (``fallback`` holds at least those), as attempt ``n + i`` of ``n`` — after
+    every SKT of the stricter pass, so that the lowest ``skt_index`` (the oracle's first
+    choice) is one of those — with the failed attempt's seconds and checks added; how many
+    were replaced)."""
+    n, by_index = len(attempts), {f[0]: f for f in fallback}
     kept = [a for a in attempts if a[1] is not None]
     filled = [(n + a[0], f[1], f[2], a[3] + f[3], a[4] + f[4])
-              for a, f in zip(attempts, fallback, strict=True) if a[1] is None]
+              for a in attempts if a[1] is None for f in (by_index[a[0]],)]
     return kept + filled, len(filled)
 
 

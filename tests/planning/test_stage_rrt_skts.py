@@ -86,8 +86,9 @@ def test_test_supports_get_more_skts_with_the_same_first_ones(tiny_dataset):
 @pytest.mark.parametrize("checks", [
     {"probe_train_objects": True, "train_objects_from_m": 0.0, "penetration_tol_m": 0.0,
      "wall_train_objects": False},
-    {"probe_train_objects": False, "wall_train_objects": True, "wall_from_m": 0.0}],
-    ids=["in the probe", "off the wall"])
+    {"probe_train_objects": False, "wall_train_objects": True, "wall_from_m": 0.0},
+    {"probe_train_objects": False, "wall_train_objects": True, "wall_from_m": 0.0, "planner": "per_skt"}],
+    ids=["in the probe", "off the wall", "off the wall, a search per SKT"])
 def test_a_support_no_training_object_clears_is_planned_for_the_reference_alone(tiny_dataset, tmp_path, checks):
     """With the training objects in the probe, or kept off the wall, a support none of their
     paths clears falls back to the reference alone: the same SKTs as planning without them
@@ -101,7 +102,8 @@ def test_a_support_no_training_object_clears_is_planned_for_the_reference_alone(
     blocker = SktObject("cube", str(tmp_path / "cube" / "visual.obj"),
                         str(tmp_path / "cube" / "collision.obj"), tuple(np.eye(4).ravel()))
     plain = plan_support_skts(dataclasses.replace(task, params=task.params.model_copy(
-        update={"probe_train_objects": False, "wall_train_objects": False})))
+        update={"probe_train_objects": False, "wall_train_objects": False,
+                "planner": checks.get("planner", task.params.planner)})))
     assert plain["probe"] == "reference" and plain["skts"]
     with_objects = dataclasses.replace(task, train_objects=(blocker,),
                                        params=task.params.model_copy(update=checks))
@@ -124,5 +126,6 @@ def test_fill_failed_replaces_only_the_failed_attempts_and_keeps_their_cost():
     assert got[0] is strict[0]  # a strict SKT is kept as it is, first
     assert got[1][:3] == (4, fallback[1][1], None) and got[1][3:] == (6.0, 60)  # attempt 3 + 1
     assert got[2] == (5, None, "no_path", 1.5, 12)  # failed both ways: the fallback's reason
-    with pytest.raises(ValueError):
-        fill_failed(strict, fallback[:2])
+    assert fill_failed(strict, fallback[1:]) == (got, 2)  # the failed attempts' are enough
+    with pytest.raises(KeyError):
+        fill_failed(strict, fallback[:2])  # attempt 2's is missing
