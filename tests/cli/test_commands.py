@@ -2,24 +2,25 @@
 pays for neither PyTorch nor the evaluation's modules (each ``skt`` run is a process of its
 own, so what it imports is paid on every run)."""
 
+import json
 import subprocess
 import sys
 
 from skt_lib.cli.main import COMMANDS, build_parser
 
 PROBE = """
-import sys
+import json, sys
 from skt_lib.cli.main import build_parser
 build_parser({command!r})
-print(sorted(m for m in ("torch", "skt_lib.cli.hang", "skt_lib.cli.predict", "skt_lib.cli.import_mesh",
-                         "skt_lib.cli.import_support") if m in sys.modules))
+print(json.dumps(sorted(m for m in ("torch", "skt_lib.cli.hang", "skt_lib.cli.predict", "skt_lib.cli.import_mesh",
+                         "skt_lib.cli.import_support") if m in sys.modules)))
 """
 
 
 def _imported(command) -> list[str]:
     out = subprocess.run([sys.executable, "-c", PROBE.format(command=command)], capture_output=True,
                          text=True, check=True)
-    return eval(out.stdout.strip().splitlines()[-1])
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def test_an_import_command_imports_neither_torch_nor_the_other_commands():
