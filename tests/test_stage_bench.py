@@ -71,3 +71,43 @@ def test_planner_bench_times_both_planners_on_the_same_supports(tiny_dataset):
     # the one-tree planner's SKTs of a support start at distinct points: they differ
     assert any(v for v in got["rrt_diversity_mm"].values())
     assert set(got) <= set(BENCH_ROWS) | set(BENCH_SAMPLE)
+
+
+def test_sim_bench_leaves_out_trials_whose_set_up_found_no_grasp(tiny_dataset):
+    """sim_bench on the tiny set with a recording runner: a trial the default executor could
+    not set up (ik_failed, no grasp) is timed by no executor, every other trial by all three
+    (the same trials, in the same order), and a reference verdict the default executor does
+    not repeat is reported as a disagreement."""
+    from collections import Counter
+
+    from skt_lib import speed
+    from skt_lib.config import load_params
+    from skt_lib.sim.execute import EXECUTORS
+    from tools.docs_results import BENCH_ROWS, BENCH_SAMPLE
+
+    params_path, data, _ = tiny_dataset
+    calls = []
+
+    def runner(fn, items, compute, desc):
+        calls.append((desc, [t.settings.executor for t in items], [t.trial_id for t in items]))
+        ids = [t.trial_id for t in items]
+        rows = [{"trial_id": i, "grasp": "g", "failure_reason": ""} for i in ids]
+        if "screen" in desc:
+            rows[0] |= {"grasp": "", "failure_reason": "ik_failed"}  # no grasp: left out
+            rows[1] |= {"failure_reason": "ik_failed"}  # a grasp, lost on the way: kept
+        if desc.endswith("reference"):
+            rows[-1] |= {"failure_reason": "dropped"}
+        return [{"row": r} for r in rows], Counter(), []
+
+    got = speed.sim_bench(load_params(params_path), data, 1, runner)
+    (screen, _, all_ids), *timed = calls
+    assert screen.endswith("set-up screen") and len(all_ids) >= 3
+    assert [d.rsplit(", ", 1)[1] for d, _, _ in timed] == list(EXECUTORS)
+    for desc, executors, ids in timed:
+        assert ids == all_ids[1:] and set(executors) == {desc.rsplit(", ", 1)[1]}
+    assert got["sim_bench_trials"] == len(all_ids) - 1
+    assert got["sim_bench_setup_failures_excluded"] == 1
+    assert got["sim_bench_failures_reference"] == 1
+    assert got["sim_verdict_disagreements"] == [f"{all_ids[-1]}: dropped → success"]
+    assert got["sim_verdict_agreement"] == 1.0 - 1 / (len(all_ids) - 1)
+    assert set(got) <= set(BENCH_ROWS) | set(BENCH_SAMPLE)

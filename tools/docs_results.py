@@ -83,6 +83,7 @@ BENCH_ROWS = {
 }
 BENCH_SAMPLE = ("machine", "rrt_bench_supports", "rrt_bench_skts", "rrt_bench_skts_reference",
                 "rrt_bench_skts_per_support", "sim_bench_trials", "sim_bench_executor",
+                "sim_bench_setup_failures_excluded",
                 "sim_bench_failures_reference", "sim_verdict_disagreements",
                 "sim_verdict_disagreements_previous", "import_dense_failed", "parts_commit")
 
@@ -190,9 +191,12 @@ def bench_table(bench: dict) -> str:
                       f"({bench.get('rrt_bench_skts', '?')} planned by the one-tree planner, "
                       f"{bench.get('rrt_bench_skts_reference', '?')} by the reference)")
     if "sim_bench_trials" in bench:
+        excluded = bench.get("sim_bench_setup_failures_excluded")
         sample.append(f"simulation over {bench['sim_bench_trials']} trials (the oracle's and "
                       f"SCTDN's SKTs; {bench.get('sim_bench_failures_reference', '?')} of them "
-                      "failures)")
+                      "failures" + ("" if excluded is None else
+                                    f"; {excluded} more left out, whose set-up found no grasp")
+                      + ")")
     if "parts_commit" in bench:
         sample.append("each part at its commit: " + ", ".join(
             f"{part} {commit}" for part, commit in bench["parts_commit"].items()))
