@@ -84,9 +84,10 @@ def sim_bench(params, root: Path, per_level: int, run_items) -> dict:
     runner); each one's verdicts against the reference executor's.
 
     Trials whose set-up finds no grasp with the default executor (:func:`set_up`) are left
-    out of all three: they execute nothing, so they time the grasp search alone — up to
-    ``setup_fallbacks + 1`` SKTs × every grasp candidate, which the reference's numpy IK
-    takes over 15 minutes per trial for (support_00095, 2,304 tracked paths) — and
+    out of all three: they execute nothing, so they time the grasp search alone — every grasp
+    candidate on the trial's SKT and each it may fall back to (the oracle: all of the
+    support's stored SKTs), which the reference's numpy IK takes over 15 minutes per trial for
+    (support_00095: 8 SKTs × 288 grasps) — and
     ``sim_bench_setup_failures_excluded`` counts them."""
     p = params.sim_eval
     supports, objects, _ = load_test_set(root, params.clustering.T, params.common.seed,
