@@ -71,7 +71,7 @@ def flow_bench(root: Path, n_samples: int, seed: int) -> dict:
 SIM_BENCH_METHODS = ("oracle", "sctdn")
 
 
-def set_up(row: dict) -> bool:
+def found_grasp(row: dict) -> bool:
     """Whether a trial's set-up found a grasp (``row``: schema ``trials``): False only for
     ``ik_failed`` with no grasp chosen, a trial that spent its time in the grasp search."""
     return not (row["failure_reason"] == "ik_failed" and not row["grasp"])
@@ -83,7 +83,7 @@ def sim_bench(params, root: Path, per_level: int, run_items) -> dict:
     one after the other on ``compute.n_workers`` workers by ``run_items`` (the stages'
     runner); each one's verdicts against the reference executor's.
 
-    Trials whose set-up finds no grasp with the default executor (:func:`set_up`) are left
+    Trials whose set-up finds no grasp with the default executor (:func:`found_grasp`) are left
     out of all three: they execute nothing, so they time the grasp search alone — every grasp
     candidate on the trial's SKT and each it may fall back to (the oracle: all of the
     support's stored SKTs), which the reference's numpy IK takes over 15 minutes per trial for
@@ -104,12 +104,12 @@ def sim_bench(params, root: Path, per_level: int, run_items) -> dict:
                                 fallbacks=skt.fallbacks[:p.setup_fallbacks]) for o in objects]
 
     def run(executor: str, trials: list, label: str) -> list[dict]:
-        run = [dataclasses.replace(t, settings=dataclasses.replace(settings, executor=executor))
-               for t in trials]
-        return run_items(run_trial, run, params.compute, label)[0]
+        with_executor = dataclasses.replace(settings, executor=executor)
+        return run_items(run_trial, [dataclasses.replace(t, settings=with_executor) for t in trials],
+                         params.compute, label)[0]
 
     screen = {r["row"]["trial_id"] for r in run(default, tasks, "bench sim, set-up screen")
-              if set_up(r["row"])}
+              if found_grasp(r["row"])}
     kept = [t for t in tasks if t.trial_id in screen]
     verdicts, rates = {}, {}
     for executor in EXECUTORS:
