@@ -56,10 +56,31 @@ def wall_points(meshes_and_keypoints) -> np.ndarray:
     return points[ConvexHull(points).vertices]
 
 
+#: Obstacles are queried only where the probe may come within the clearance + this of them
+#: (m): PyBullet's distances can fall short of the geometric ones by its collision margin
+#: (1 mm on convex meshes, measured), so skipping a query beyond this never changes a verdict.
+GATE_SLACK_M = 0.005
+
+
+def obstacle_boxes(world: World, bodies: list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(lo, hi)`` in the support frame of each body's PyBullet AABB (every link; margins
+    and PyBullet's own padding included): a box that holds everything a query can meet."""
+    to_support = world.to_support(np.eye(4))
+    out = []
+    for body in bodies:
+        boxes = [pb.getAABB(body, j, physicsClientId=world.cid)
+                 for j in range(-1, pb.getNumJoints(body, physicsClientId=world.cid))]
+        lo, hi = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        moved = corners @ to_support[:3, :3].T + to_support[:3, 3]
+        out.append((moved.min(0), moved.max(0)))
+    return out
+
+
 def make_probe_collision_fn(world: World, probe: int, obstacles: list[int], clearance: float,
                             tolerance: float, hang: np.ndarray | None = None,
                             others_from_m: float = 0.0, wall: np.ndarray | None = None,
-                            wall_from_m: float = 0.0):
+                            wall_from_m: float = 0.0, probe_hull: np.ndarray | None = None):
     """``fn(position, quat) -> True`` when, with the probe's keypoint frame there (support
     frame), its first object (the reference) comes within ``clearance`` of any of
     ``obstacles``, or any other object penetrates one deeper than ``tolerance`` (PyBullet
@@ -74,25 +95,56 @@ def make_probe_collision_fn(world: World, probe: int, obstacles: list[int], clea
     ``wall`` (:func:`wall_points` of objects outside the probe, e.g. the training objects):
     the pose also collides where any of them crosses the wall plane, checked where the
     keypoint lies at least ``wall_from_m`` from ``hang`` (the reference's hang is not each
-    object's own: some cross the wall within millimetres of it and settle off it)."""
+    object's own: some cross the wall within millimetres of it and settle off it).
+
+    ``probe_hull`` (:func:`wall_points` of the probe's own collision parts): an obstacle is
+    then queried only where the probe can reach its box (:func:`obstacle_boxes`) within
+    ``clearance`` + :data:`GATE_SLACK_M` — its bounding sphere, then its hull's least x
+    (the wall and a support's tip lie behind the probe for much of a path). A skipped query
+    is one that would have found nothing: the verdicts are the same, bit for bit
+    (``tests/planning/test_probe.py``)."""
     cid = world.cid
     support_pq = tuple(map(tuple, matrix_pose(SUPPORT_POSE_WORLD)))
     near_sq = others_from_m ** 2 if hang is not None else -1.0
     wall_near_sq = wall_from_m ** 2 if hang is not None else -1.0
-    hang = np.zeros(3) if hang is None else np.asarray(hang, float)
+    hx, hy, hz = (0.0, 0.0, 0.0) if hang is None else map(float, hang)
+    reach = clearance + GATE_SLACK_M
+    if probe_hull is not None:
+        radius = float(np.linalg.norm(probe_hull, axis=1).max())
+        gates = [(o, *map(float, lo - reach), *map(float, hi + reach))
+                 for o, (lo, hi) in zip(obstacles, obstacle_boxes(world, obstacles))]
+    else:
+        radius, gates = np.inf, [(o,) + (-np.inf,) * 3 + (np.inf,) * 3 for o in obstacles]
 
     def collides(position, quat) -> bool:
         """``position`` (3,) and xyzw ``quat`` of the keypoint frame, support frame."""
-        pos, orn = pb.multiplyTransforms(*support_pq, position, quat)
-        pb.resetBasePositionAndOrientation(probe, pos, orn, physicsClientId=cid)
-        d = np.subtract(position, hang)
-        d2 = float(d @ d)
+        px, py, pz = float(position[0]), float(position[1]), float(position[2])
+        d2 = (px - hx) ** 2 + (py - hy) ** 2 + (pz - hz) ** 2
+        x_axis = None
         if wall is not None and d2 >= wall_near_sq:
             x_axis = pb.getMatrixFromQuaternion(quat)[:3]  # the frame's rotation, first row
-            if float((wall @ x_axis).min()) + position[0] < 0.0:
+            if float((wall @ x_axis).min()) + px < 0.0:
                 return True
         only_reference = {"linkIndexA": 0} if d2 < near_sq else {}
-        for o in obstacles:
+        placed = False
+        least_x = None
+        for o, lx, ly, lz, ux, uy, uz in gates:
+            gx = lx - px if px < lx else (px - ux if px > ux else 0.0)
+            gy = ly - py if py < ly else (py - uy if py > uy else 0.0)
+            gz = lz - pz if pz < lz else (pz - uz if pz > uz else 0.0)
+            if gx * gx + gy * gy + gz * gz > radius * radius:
+                continue  # the bounding sphere cannot reach the box
+            if probe_hull is not None:
+                if least_x is None:
+                    if x_axis is None:
+                        x_axis = pb.getMatrixFromQuaternion(quat)[:3]
+                    least_x = float((probe_hull @ x_axis).min()) + px
+                if least_x > ux:
+                    continue  # the whole probe lies in front of the box
+            if not placed:
+                pos, orn = pb.multiplyTransforms(*support_pq, position, quat)
+                pb.resetBasePositionAndOrientation(probe, pos, orn, physicsClientId=cid)
+                placed = True
             for c in pb.getClosestPoints(probe, o, clearance, physicsClientId=cid, **only_reference):
                 if c[3] == 0 or c[8] < -tolerance:
                     return True

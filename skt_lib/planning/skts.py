@@ -260,9 +260,12 @@ def plan_support_skts(task: SktTask) -> dict:
         probe and ``wall`` points (:func:`wall_points`) kept off the wall."""
         probe = add_probe(world, [ProbeObject(o.collision, o.keypoint) for o in objs])
         gated = len(objs) > 1 or wall is not None
+        # the per-SKT planner is kept as it was, the reference: every obstacle at every pose
+        hull = (wall_points([(part, _kp(o)) for o in objs for part in read_obj(o.collision)])
+                if p.planner == "one_tree" else None)
         collides = make_probe_collision_fn(world, probe, obstacles, p.clearance_m, p.penetration_tol_m,
                                            k_goal if gated else None, p.train_objects_from_m, wall,
-                                           p.wall_from_m)
+                                           p.wall_from_m, hull)
         settings = thread_settings(p, max(_radius(read_obj(o.mesh)[0], _kp(o)) for o in objs), task.T)
         return list(_plan(task, goal, n_attempts(p, task.split), in_start, sample_start, lower, upper,
                           collides, settings, rng, k_goal + (lo_off + hi_off) / 2,

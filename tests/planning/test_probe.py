@@ -1,12 +1,15 @@
 """The planner's probe: the reference keeps its clearance everywhere, the other objects are
 checked only away from the hang when asked, and objects kept off the wall plane exactly."""
 
+from contextlib import contextmanager
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from skt_lib.geometry.convex import box
-from skt_lib.geometry.export import write_shape
+from skt_lib.geometry.export import read_obj, write_shape
 from skt_lib.geometry.se3 import invert
+import skt_lib.planning.probe as probe_module
 from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn, wall_points
 from skt_lib.sim.world import World
 
@@ -91,3 +94,55 @@ def test_objects_kept_off_the_wall_beyond_wall_from_m(tmp_path):
         assert [ring_only(goal[:3, 3] + o, quat) for o in offsets] == [False] * 5
         assert [everywhere(goal[:3, 3] + o, quat) for o in offsets] == crosses
         assert [gated(goal[:3, 3] + o, quat) for o in offsets] == [False, False, True, False, False]
+
+
+def test_gated_queries_give_the_verdicts_of_querying_every_obstacle(tmp_path):
+    """With ``probe_hull`` the probe skips the PyBullet queries of obstacles it cannot reach
+    (its bounding sphere, then its hull's least x, against their boxes): every verdict must
+    be the ungated one — on poses that sweep the band where PyBullet's 1 mm margin on convex
+    meshes reports a clear pose as within the clearance, in front of the wall and beside the
+    peg — and the gate must skip queries, or it saves nothing."""
+    _, _, k = _scene(tmp_path)
+    parts = read_obj(tmp_path / "ring" / "collision.obj")
+    hull = wall_points([(part, k) for part in parts])
+    rng = np.random.default_rng(7)
+    rot = Rotation.random(400, random_state=rng).as_matrix()
+    least_x = np.einsum("kj,nj->nk", hull, rot[:, 0, :]).min(axis=1)
+    # in front of the wall: the hull's least x from 0 to 3 mm (clearance 0.5 mm + margin)
+    at_wall = np.c_[-least_x + rng.uniform(0.0, 0.003, 400), rng.uniform(-0.1, 0.1, (400, 2))]
+    # around the peg's tip and along it, and far off
+    around = np.c_[rng.uniform(0.0, 0.3, 400), rng.uniform(-0.12, 0.12, (400, 2))]
+    queries = []
+    with World(1 / 240, 1, with_floor=False) as world:
+        obstacles = [world.load(str(tmp_path / "sup" / "sup.urdf"), np.eye(4), True, 0.5), world.add_wall()]
+        probe = add_probe(world, [ProbeObject(str(tmp_path / "ring" / "collision.obj"), tuple(k.ravel()))])
+        every = make_probe_collision_fn(world, probe, obstacles, 0.0005, 0.0)
+        gated = make_probe_collision_fn(world, probe, obstacles, 0.0005, 0.0, probe_hull=hull)
+        verdicts = []
+        for positions in (at_wall, around):
+            for p, r in zip(positions, rot):
+                q = Rotation.from_matrix(r).as_quat()
+                with _counting(queries):
+                    g = gated(p, q)
+                verdicts.append((every(p, q), g))
+    truth = [e for e, _ in verdicts]
+    assert [g for _, g in verdicts] == truth
+    assert 50 < sum(truth[:400]) < 350  # the wall band holds both verdicts
+    assert sum(truth[400:]) > 20  # and so do the poses around the peg
+    assert len(queries) < 0.6 * 2 * 800, len(queries)  # both obstacles on every pose: 1,600
+
+
+@contextmanager
+def _counting(calls: list):
+    """Record every ``pybullet.getClosestPoints`` call made by the probe module meanwhile."""
+    real = probe_module.pb.getClosestPoints
+
+    def counted(*args, **kwargs):
+        calls.append(args[1])
+        return real(*args, **kwargs)
+
+    probe_module.pb.getClosestPoints = counted
+    try:
+        yield
+    finally:
+        probe_module.pb.getClosestPoints = real
