@@ -55,27 +55,43 @@ class MeshClearance:
         ``max_step_m``: a bound on how far any point of the object moves between consecutive
         poses (``executed_path``'s step). The clearance is then found without evaluating
         every pose, and is still exactly the minimum over all of them: every term is a
-        distance of a moved point (or to the moved mesh), so a pose ``m`` steps from one of
-        clearance ``v`` has at least ``v − m·max_step_m``. Every :data:`STRIDE`-th pose is
-        evaluated, then only the poses between two evaluated ones whose bound could fall
-        below the smallest value found (:data:`BOUND_SLACK_M` of slack for float32 distances).
+        distance of a moved point (or to the moved mesh), so a pose that its neighbour's
+        points move at most ``m`` from has at least that neighbour's value − ``m``. Each step
+        is bounded by the smaller of ``max_step_m`` and what the poses themselves give
+        (:meth:`step_bounds`). Every :data:`STRIDE`-th pose is evaluated, then the pose
+        halfway between two evaluated ones whose bound could fall below the smallest value
+        found (:data:`BOUND_SLACK_M` of slack for float32 distances), and so on, halving.
         The bound is taken on the values capped at :data:`REVERSE_MARGIN_M`: support samples
         beyond the object's reach + that margin are not evaluated, so only below it is each
         pose's value the minimum of distances (which move no faster than the points)."""
         poses = np.asarray(poses).reshape(-1, 4, 4)
         if max_step_m is None or len(poses) <= 2 * STRIDE:
             return float(self.per_pose(poses, chunk).min(initial=self._support.shell))
-        coarse = np.unique(np.r_[np.arange(0, len(poses), STRIDE), len(poses) - 1])
-        v = self.per_pose(poses[coarse], chunk)
-        best = float(v.min())
-        gap = np.diff(coarse)
-        capped = np.minimum(v, REVERSE_MARGIN_M)
-        lower = (capped[:-1] + capped[1:] - gap * max_step_m) / 2  # the least any pose between can have
-        refine = [np.arange(a + 1, b) for a, b, low in zip(coarse[:-1], coarse[1:], lower)
-                  if b > a + 1 and low <= best + BOUND_SLACK_M]
-        if refine:
-            best = min(best, float(self.per_pose(poses[np.concatenate(refine)], chunk).min()))
+        moved = np.r_[0.0, np.cumsum(np.minimum(self.step_bounds(poses), max_step_m))]
+        capped = np.empty(len(poses))
+        best = np.inf
+        todo = np.unique(np.r_[np.arange(0, len(poses), STRIDE), len(poses) - 1])
+        a, b = todo[:-1], todo[1:]
+        while len(todo):
+            v = self.per_pose(poses[todo], chunk)
+            best, capped[todo] = min(best, float(v.min())), np.minimum(v, REVERSE_MARGIN_M)
+            open_ = b > a + 1
+            a, b = a[open_], b[open_]
+            lower = (capped[a] + capped[b] - (moved[b] - moved[a])) / 2  # the least any pose between can have
+            refine = lower <= best + BOUND_SLACK_M
+            a, b = a[refine], b[refine]
+            todo = (a + b) // 2
+            a, b = np.r_[a, todo], np.r_[todo, b]
         return best
+
+    def step_bounds(self, poses: np.ndarray) -> np.ndarray:
+        """``(N − 1,)``: how far any object sample moves at most from each pose to the next —
+        the frame's shift plus the chord its rotation sweeps at the object's radius
+        (``2 sin(θ/2) r``), with :data:`STEP_SLACK_M` for rounding."""
+        shift = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
+        trace = np.einsum("nij,nij->n", poses[:-1, :3, :3], poses[1:, :3, :3])  # tr(Ra^T Rb)
+        chord = np.sqrt(np.maximum(3.0 - trace, 0.0))  # 2 sin(θ/2), θ the relative rotation
+        return shift + chord * self._obj_radius + STEP_SLACK_M
 
     def per_pose(self, poses: np.ndarray, chunk: int = 128) -> np.ndarray:
         """:meth:`clearance` of each of ``poses (N, 4, 4)`` on its own, ``(N,)``."""
@@ -133,6 +149,9 @@ STRIDE = 4
 REVERSE_MARGIN_M = 0.005
 #: Slack (m) on the Lipschitz bound of the refinement: Open3D's distances are float32.
 BOUND_SLACK_M = 1e-5
+#: Added to each step bound (m): the rotation's chord is found from a trace near 3, whose
+#: rounding (~1e-15) gives at most ~3e-8 of chord, times a radius under a metre.
+STEP_SLACK_M = 1e-7
 #: Edge of the cells (m) samples are grouped in, so that whole cells out of reach are skipped
 #: before any of their samples is moved (:class:`_Cells`).
 CELL_M = 0.01
