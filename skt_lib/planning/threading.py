@@ -214,11 +214,13 @@ class _Checker:
         n = max(1, int(np.ceil((np.linalg.norm(pb - pa) + angle * self.s.probe_radius_m)
                                / self.s.check_step_m)))
         u = np.arange(1, n + 1) / n
-        quats = None if angle < 1e-9 else _slerp(qa, qb, u)  # None: qb throughout
-        move = pb - pa
+        # all poses at once, as plain lists (the probe takes them a pose at a time)
+        positions = (pa + np.outer(u, pb - pa)).tolist()
+        quats = [qb.tolist()] * n if angle < 1e-9 else _slerp(qa, qb, u).tolist()
+        collides = self.collides
         for k in range(n):
             self.n += 1
-            if self.collides(pa + u[k] * move, qb if quats is None else quats[k]):
+            if collides(positions[k], quats[k]):
                 return False
         return True
 
