@@ -43,9 +43,11 @@ def main(argv=None) -> int:
     mg = root / "mesh_gen"
     t0 = time.perf_counter()
     work = item_store(args)
-    # test supports first: their object sweeps make them the longest items, and a long item
-    # started last leaves a core idle at the end (results are keyed by support either way)
-    longest_first = sorted(tasks, key=lambda t: t.split != "test")
+    # the longest items first — test supports (their object sweeps), then the harder levels:
+    # a long item started last leaves a core idle at the end (results are keyed by support)
+    hardest = {lv: -i for i, lv in enumerate(LEVELS)}
+    longest_first = sorted(tasks, key=lambda t: (t.split != "test",
+                                                 hardest[supports.loc[t.support_id, "difficulty"]]))
     results, crash_counts, crashed = run_items(plan_support_skts, longest_first, params.compute,
                                                "supports", work=work)
     rank = {t.support_id: i for i, t in enumerate(tasks)}

@@ -23,7 +23,9 @@ def rrt_bench(params, root: Path, per_level: int, n_skts: int, run_items) -> dic
     p = params.rrt_skts.model_copy(update={"n_skts_per_support": n_skts,
                                            "n_skts_per_test_support": n_skts})
     all_tasks = load_skt_tasks(root, params.common.seed, p, params.clustering.T)
-    chosen = [t for lv in LEVELS
+    # the hardest level first, as the stage orders its longest items: a very hard support
+    # started last holds one worker while the other idles (both planners get this order)
+    chosen = [t for lv in reversed(LEVELS)
               for t in [t for t in all_tasks if supports.loc[t.support_id, "difficulty"] == lv][:per_level]]
     out = {"rrt_bench_supports": len(chosen), "rrt_bench_skts_per_support": n_skts}
     for planner, suffix in (("per_skt", "_reference"), ("one_tree", "")):
