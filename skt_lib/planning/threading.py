@@ -50,6 +50,7 @@ give it:
 Deterministic: the caller's generator drives every sample; the budget is counted in checks.
 """
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -90,8 +91,14 @@ class ThreadSettings:
     route_bias: float = 0.0  # share of tree samples drawn near the arm's threading route
 
 
+def _norm(v: np.ndarray) -> float:
+    """``np.linalg.norm`` of a float vector, bit for bit (it is ``sqrt(v.dot(v))``), without its
+    per-call overhead: the planner takes hundreds of thousands."""
+    return math.sqrt(float(v.dot(v)))
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
+    return v / _norm(v)
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -148,7 +155,7 @@ def exec_frames_kept(points: np.ndarray, old_frames: np.ndarray, m: int) -> np.n
         if c2 > 1e-24:
             r = r - (2.0 * float(v2 @ r) / c2) * v2
         r = r - float(r @ t[i]) * t[i]
-        y[i] = r / np.linalg.norm(r)
+        y[i] = r / _norm(r)
     out = np.empty((n, 4, 4))
     out[m + 1:] = old_frames[-(n - m - 1):]
     new = np.tile(np.eye(4), (m + 1, 1, 1))
@@ -174,7 +181,7 @@ def _quat(r: np.ndarray) -> np.ndarray:
         w = np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2.0
         q = [(r[0, 2] + r[2, 0]) / w, (r[1, 2] + r[2, 1]) / w, 0.25 * w, (r[1, 0] - r[0, 1]) / w]
     q = np.asarray(q)
-    return q / np.linalg.norm(q)
+    return q / _norm(q)
 
 
 def _slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -206,12 +213,13 @@ class _Checker:
                 return False
         return True
 
-    def segment(self, pa, pb, ra, rb) -> bool:
+    def segment(self, pa, pb, ra, rb, qa=None, qb=None) -> bool:
         """Straight motion ``pa → pb`` with the orientation slerped ``ra → rb`` (as executed),
-        ``pb`` included, ``pa`` not."""
-        qa, qb = _quat(ra), _quat(rb)
+        ``pb`` included, ``pa`` not; ``qa``, ``qb``: their :func:`_quat`, where known."""
+        qa = _quat(ra) if qa is None else qa
+        qb = _quat(rb) if qb is None else qb
         angle = 2.0 * np.arccos(min(1.0, abs(float(np.dot(qa, qb)))))
-        n = max(1, int(np.ceil((np.linalg.norm(pb - pa) + angle * self.s.probe_radius_m)
+        n = max(1, int(np.ceil((_norm(pb - pa) + angle * self.s.probe_radius_m)
                                / self.s.check_step_m)))
         u = np.arange(1, n + 1) / n
         # all poses at once, as plain lists (the probe takes them a pose at a time)
@@ -245,8 +253,16 @@ class _Checker:
         # new stretches first: a shortcut through the support fails there, before the rest
         # of the path (whose frames it rolled) is checked; the verdict is the same either way
         todo.sort(key=lambda k: old[k] >= 0 and old[k + 1] >= 0)
+        quats: dict[int, np.ndarray] = {}  # consecutive segments share a frame
+
+        def quat(k: int) -> np.ndarray:
+            if k not in quats:
+                quats[k] = _quat(frames[k][:3, :3])
+            return quats[k]
+
         for k in todo:
-            if not self.segment(points[k], points[k + 1], frames[k][:3, :3], frames[k + 1][:3, :3]):
+            if not self.segment(points[k], points[k + 1], frames[k][:3, :3], frames[k + 1][:3, :3],
+                                quat(k), quat(k + 1)):
                 return None
         return frames
 
@@ -462,6 +478,7 @@ class _Tree:
         self.n = len(lead)
         self.dirs = [a0] * len(lead)
         self.rots = [r0] * len(lead)
+        self.quats = [_quat(r0)] * len(lead)  # :func:`_quat` of each of ``rots``
         self.parent = [-1] + list(range(len(lead) - 1))
         self.first_free = len(lead) - 1  # the root and the lead-in's inside are not extended
         self._closed = np.zeros(len(self._pos), bool)  # leaves: never extended
@@ -493,22 +510,25 @@ class _Tree:
             if np.any(new < self.lower) or np.any(new > self.upper):
                 continue
             rd = transport(self.rots[i], d)  # the frame at i (and at the new leaf) with this child
-            if not check.segment(new, p_i, rd, rd):
+            qd = _quat(rd)
+            if not check.segment(new, p_i, rd, rd, qd, qd):
                 continue
-            if self.parent[i] >= 0 and not check.segment(p_i, self._pos[self.parent[i]], rd, self.rots[i]):
+            if self.parent[i] >= 0 and not check.segment(p_i, self._pos[self.parent[i]], rd,
+                                                         self.rots[i], qd, self.quats[i]):
                 continue
-            v = self._add(new, d, rd, i)
+            v = self._add(new, d, rd, qd, i)
             if in_start(new):
                 self._closed[v] = True
                 return v
 
-    def _add(self, p: np.ndarray, d: np.ndarray, r: np.ndarray, parent: int) -> int:
+    def _add(self, p: np.ndarray, d: np.ndarray, r: np.ndarray, q: np.ndarray, parent: int) -> int:
         if self.n == len(self._pos):
             self._pos = np.concatenate([self._pos, np.empty_like(self._pos)])
             self._closed = np.concatenate([self._closed, np.zeros(len(self._closed), bool)])
         self._pos[self.n] = p
         self.dirs.append(d)
         self.rots.append(r)
+        self.quats.append(q)
         self.parent.append(parent)
         self.n += 1
         return self.n - 1
