@@ -35,7 +35,8 @@ BENCH_ROWS = {
     "rrt_skts_per_min": ("{:.0f}", "SKTs planned and re-checked per minute of wall time, "
                                    "`compute.n_workers` workers: the one-tree planner"),
     "rrt_plan_s_median_reference": ("{:.2f} s", "planning time per SKT attempt, the per-SKT "
-                                                "reference planner (a fresh search per SKT)"),
+                                                "reference planner (a fresh search per SKT, every "
+                                                "obstacle queried at every pose)"),
     "rrt_recheck_s_median_reference": ("{:.2f} s", "re-check time per SKT, the reference's SKTs"),
     "rrt_skts_per_min_reference": ("{:.0f}", "the same supports and SKT count with the "
                                              "reference planner, same run"),
