@@ -6,8 +6,9 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
 - ``rrt_plan_s_median`` / ``rrt_recheck_s_median``: per SKT attempt / re-check, and
   ``rrt_skts_per_min`` on ``compute.n_workers`` workers, at ``--rrt-skts`` SKTs per support
   over supports balanced across levels (the hardest first, as ``rrt_skts`` orders its longest
-  items); the same for the per-SKT reference planner (``*_reference``) in the same run, ``rrt_speedup_vs_reference_planner`` the ratio, and
-  ``rrt_diversity_mm*`` the mean pairwise distance of a support's SKTs, per level;
+  items); the same for the per-SKT reference planner (``*_reference``) in the same run,
+  ``rrt_speedup_vs_reference_planner`` the ratio, and ``rrt_diversity_mm*`` the mean
+  pairwise distance of a support's SKTs, per level;
 - ``render_ms_per_view_median``: ray casting of one 320×240 view (Open3D), and
   ``render_total_ms_per_view_median``: the whole view (ray casting, FPS to N, shuffle,
   NPZ write share), over the same sample of supports, one process;
