@@ -99,7 +99,12 @@ def write_report(rep: Path, params, metrics: dict, results: list[dict], supports
                 f"as executed: {metrics['test_sweep_n_pairs']} pairs, "
                 f"clear (penetration ≤ {sweep_tol_m * 1000:.0f} mm) "
                 f"{100 * (metrics['test_sweep_clear_rate'] or 0):.1f} %, median clearance "
-                f"{metrics['test_sweep_clearance_mm_median'] or 0:.1f} mm (capped at 6 mm). Test objects "
+                f"{metrics['test_sweep_clearance_mm_median'] or 0:.1f} mm (capped at 6 mm). Split where "
+                f"the keypoint comes within {p.train_objects_from_m * 1000:.0f} mm of the hang for the "
+                f"last time: clear on the way there {100 * (metrics['test_sweep_clear_rate_on_way'] or 0):.1f} %, "
+                f"clear from there on {100 * (metrics['test_sweep_clear_rate_near_hang'] or 0):.1f} % "
+                "(there the object's own pose at the reference's hanging keypoint decides, which no "
+                "path changes: each object would settle its own way). Test objects "
                 "take no part in planning" + (
                     f"; training objects did (probe), where the keypoint lies "
                     f"{p.train_objects_from_m * 1000:.0f} mm or more from the hang"

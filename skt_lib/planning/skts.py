@@ -157,6 +157,16 @@ def sweep_clearance(checker: MeshClearance, frames: np.ndarray, keypoint: np.nda
     return checker.clearance(frames @ invert(keypoint), max_step_m=max_step_m)
 
 
+def approach_start(frames: np.ndarray, hang: np.ndarray, near_m: float) -> int:
+    """Where the final approach of an executed path ``frames (M, 4, 4)`` begins: the index
+    after the last frame whose keypoint lies farther than ``near_m`` from ``hang (3,)`` (0
+    when none does). Test objects' sweeps are split there: within it, an object's own pose at
+    the reference's hanging keypoint decides (each object settles its own way, and no path
+    changes that pose); before it, the way the SKT takes does."""
+    far = np.flatnonzero(np.linalg.norm(frames[:, :3, 3] - np.asarray(hang, float), axis=1) > near_m)
+    return int(far[-1]) + 1 if len(far) else 0
+
+
 def skt_diversity_m(keypoints: list[np.ndarray], T: int) -> float | None:
     """How much one support's SKTs differ: the mean, over pairs of SKTs, of the mean distance
     (m) between their waypoints resampled to ``T``; ``None`` with fewer than two SKTs."""
@@ -290,8 +300,12 @@ def plan_support_skts(task: SktTask) -> dict:
         for o in task.test_objects:
             mesh, kp = read_obj(o.mesh)[0], _kp(o)
             frames = executed_path(waypoints, p.recheck_step_m, _radius(mesh, kp))
-            sweeps.append({"object_id": o.object_id, "clearance_m": sweep_clearance(
-                MeshClearance(support_mesh, mesh, p.recheck_spacing_m), frames, kp, p.recheck_step_m)})
+            checker_o = MeshClearance(support_mesh, mesh, p.recheck_spacing_m)
+            k = approach_start(frames, k_goal, p.train_objects_from_m)
+            way, near = (sweep_clearance(checker_o, part, kp, p.recheck_step_m) if len(part) else np.inf
+                         for part in (frames[:k], frames[k:]))
+            sweeps.append({"object_id": o.object_id, "clearance_m": min(way, near),
+                           "clearance_on_way_m": way, "clearance_near_hang_m": near})
     return out | {"support_id": task.support_id, "n_attempted": n_attempts(p, task.split),
                   "test_sweeps": sweeps}
 

@@ -12,7 +12,8 @@ from skt_lib.geometry.export import read_obj, write_shape
 from skt_lib.geometry.se3 import invert, pose_matrix
 from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
-from skt_lib.planning.skts import REACH_TOL_M, SktObject, fill_failed, load_skt_tasks, plan_support_skts
+from skt_lib.planning.skts import (REACH_TOL_M, SktObject, _kp, _radius, approach_start, fill_failed,
+                                   load_skt_tasks, plan_support_skts, sweep_clearance)
 from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 
@@ -81,6 +82,39 @@ def test_test_supports_get_more_skts_with_the_same_first_ones(tiny_dataset):
     assert one["skts"], "the tiny support should get an SKT"
     np.testing.assert_array_equal(test["skts"][0]["keypoints"], one["skts"][0]["keypoints"])
     np.testing.assert_array_equal(train["skts"][0]["keypoints"], one["skts"][0]["keypoints"])
+
+
+def test_test_sweeps_split_at_the_final_approach_and_their_least_is_the_whole_sweep(tiny_dataset):
+    """A test object's sweep is split where the keypoint comes within ``train_objects_from_m``
+    of the hang for the last time; the least of the two parts is, bit for bit, the sweep of
+    the whole executed path (what ``test_sweep_clear_rate`` has always measured)."""
+    params, data, _ = tiny_dataset
+    p = load_params(params)
+    task = load_skt_tasks(data, p.common.seed, p.rrt_skts, p.clustering.T)[0]
+    objects = task.train_objects  # standing in for test objects
+    got = plan_support_skts(dataclasses.replace(task, split="test", test_objects=objects))
+    assert len(got["test_sweeps"]) == len(objects) > 0
+    (support_mesh,) = read_obj(task.support_mesh)
+    hang = (pose_matrix(task.goal_position, task.goal_quat) @ _kp(task.reference))[:3, 3]
+    waypoints = resample(got["skts"][0]["keypoints"], task.T)
+    for o, w in zip(objects, got["test_sweeps"]):
+        mesh, kp = read_obj(o.mesh)[0], _kp(o)
+        frames = executed_path(waypoints, p.rrt_skts.recheck_step_m, _radius(mesh, kp))
+        whole = sweep_clearance(MeshClearance(support_mesh, mesh, p.rrt_skts.recheck_spacing_m),
+                                frames, kp, p.rrt_skts.recheck_step_m)
+        assert w["clearance_m"] == whole == min(w["clearance_on_way_m"], w["clearance_near_hang_m"])
+        k = approach_start(frames, hang, p.rrt_skts.train_objects_from_m)
+        assert 0 < k < len(frames)  # the tiny SKT starts farther out than that
+
+
+def test_approach_start_is_after_the_last_frame_far_from_the_hang():
+    hang = np.array([0.1, 0.0, 0.0])
+    xs = [0.30, 0.20, 0.12, 0.125, 0.20, 0.14, 0.13, 0.11, 0.10]  # in, out again, in for good
+    frames = np.tile(np.eye(4), (len(xs), 1, 1))
+    frames[:, 0, 3] = xs
+    assert approach_start(frames, hang, 0.03) == 6  # 0.14 is the last one beyond 3 cm
+    assert approach_start(frames[6:], hang, 0.03) == 0  # all within: all of it is the approach
+    assert approach_start(frames, hang, 0.0) == len(xs) - 1  # only the hang itself
 
 
 @pytest.mark.parametrize("checks", [
