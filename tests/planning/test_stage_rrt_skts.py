@@ -100,11 +100,18 @@ def test_test_sweeps_split_at_the_final_approach_and_their_least_is_the_whole_sw
     for o, w in zip(objects, got["test_sweeps"]):
         mesh, kp = read_obj(o.mesh)[0], _kp(o)
         frames = executed_path(waypoints, p.rrt_skts.recheck_step_m, _radius(mesh, kp))
-        whole = sweep_clearance(MeshClearance(support_mesh, mesh, p.rrt_skts.recheck_spacing_m),
-                                frames, kp, p.rrt_skts.recheck_step_m)
-        assert w["clearance_m"] == whole == min(w["clearance_on_way_m"], w["clearance_near_hang_m"])
+        checker = MeshClearance(support_mesh, mesh, p.rrt_skts.recheck_spacing_m)
+
+        def sweep(part):
+            return sweep_clearance(checker, part, kp, p.rrt_skts.recheck_step_m)
+
         k = approach_start(frames, hang, p.rrt_skts.train_objects_from_m)
         assert 0 < k < len(frames)  # the tiny SKT starts farther out than that
+        # each part is the sweep of its own frames, and their least is the whole sweep
+        assert w["clearance_on_way_m"] == sweep(frames[:k])
+        assert w["clearance_near_hang_m"] == sweep(frames[k:])
+        assert w["clearance_m"] == sweep(frames) == min(w["clearance_on_way_m"],
+                                                        w["clearance_near_hang_m"])
 
 
 def test_approach_start_is_after_the_last_frame_far_from_the_hang():
