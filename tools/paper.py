@@ -1,0 +1,274 @@
+"""``make paper``: the paper preset, end to end, in a workspace of its own.
+
+    .venv/bin/python -m tools.paper                 # run (or resume) it, then collect its reports
+    .venv/bin/python -m tools.paper --seeds 3       # … and the learned methods' extra seeds
+    .venv/bin/python -m tools.paper --collect-only  # copy an up-to-date workspace's reports
+
+The workspace (``paper/`` by default, git- and DVC-ignored) is a ``git clone`` of this
+checkout's HEAD, so the run is of committed code only; its ``params.yaml`` is the committed
+``params.yaml`` with ``params.paper.yaml``'s overrides (and any ``-S key=value``) applied. The
+pipeline is then ``dvc repro`` there, with the workspace's own ``dvc.lock``, ``data/`` and
+DVC cache: the default's ``dvc.lock``, ``data/`` and ``reports/`` are never touched.
+
+Resuming: run it again. A later HEAD is checked out in the workspace with its ``dvc.lock``
+kept, so DVC reruns exactly the stages whose code, params or inputs changed; a stage killed
+mid-run resumes from its finished items (``skt_lib/resume.py``) and ends with the bytes of an
+uninterrupted run.
+
+Every ``dvc repro`` (a *segment*) runs under :class:`tools.scaling.TreeMonitor`: each stage's
+wall time, CPU time and peak memory (the stage's process and its workers) are appended to
+``<workspace>/logs/paper-segments.json``. When the pipeline is up to date the reports are
+collected into ``reports/paper/``: every stage's report folder, the workspace's ``params.yaml``
+and ``dvc.lock``, and ``run.json`` (commit, machine, segments, per-stage totals), summarised
+in ``reports/paper/README.md``.
+"""
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+import yaml
+
+from tools.scaling import TreeMonitor, run_monitored
+
+ROOT = Path(__file__).resolve().parents[1]
+PRESET = ROOT / "params.paper.yaml"
+STAGES = ("mesh_gen", "contact_sim", "rotation_extraction", "rrt_skts", "render_views",
+          "affordance_maps", "clustering", "train", "train_baselines", "sim_eval")
+
+
+def git(*args: str, cwd: Path) -> str:
+    return subprocess.run(["git", *args], cwd=cwd, check=True, text=True,
+                          capture_output=True).stdout.strip()
+
+
+def merge(base: dict, over: dict, where: str = "") -> dict:
+    """``base`` with ``over``'s values put in, recursively; a key ``base`` lacks is an error
+    naming it (a typo would otherwise silently run the default)."""
+    out = dict(base)
+    for key, value in over.items():
+        name = f"{where}{key}"
+        if key not in base:
+            raise SystemExit(f"ERROR: {name}: not a key of params.yaml")
+        out[key] = merge(base[key], value, f"{name}.") if isinstance(value, dict) else value
+    return out
+
+
+def set_overrides(pairs: list[str]) -> dict:
+    """``-S section.key=value`` (value read as YAML) → a nested dict."""
+    out: dict = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        if not sep or not key:
+            raise SystemExit(f"ERROR: -S {pair!r}: expected section.key=value")
+        *path, last = key.split(".")
+        node = out
+        for part in path:
+            node = node.setdefault(part, {})
+        node[last] = yaml.safe_load(text)
+    return out
+
+
+def sync_workspace(source: Path, ws: Path) -> str:
+    """Clone ``source`` into ``ws``, or move an existing workspace to ``source``'s HEAD while
+    keeping what its runs wrote (``dvc.lock`` and ``reports/``: DVC compares them with what
+    made its outputs); returns the commit."""
+    commit = git("rev-parse", "HEAD", cwd=source)
+    if not (ws / ".git").is_dir():
+        if ws.exists() and any(ws.iterdir()):
+            raise SystemExit(f"ERROR: {ws}: exists and is not a paper workspace (no .git)")
+        subprocess.run(["git", "clone", "-q", "--no-checkout", str(source), str(ws)], check=True)
+        subprocess.run(["git", "checkout", "-q", "--detach", commit], cwd=ws, check=True)
+    elif git("rev-parse", "HEAD", cwd=ws) != commit:
+        subprocess.run(["git", "fetch", "-q", str(source), commit], cwd=ws, check=True)
+        kept = ws / "logs" / "kept"
+        shutil.rmtree(kept, ignore_errors=True)
+        kept.mkdir(parents=True)
+        for name in ("dvc.lock", "reports"):
+            if (ws / name).exists():
+                (ws / name).rename(kept / name)
+        subprocess.run(["git", "checkout", "-q", "-f", "--detach", commit], cwd=ws, check=True)
+        for name in ("dvc.lock", "reports"):
+            if (kept / name).exists():
+                shutil.rmtree(ws / name, ignore_errors=True)
+                (kept / name).rename(ws / name)
+        kept.rmdir()
+    venv = source / ".venv"
+    if venv.is_dir() and not (ws / ".venv").exists():
+        (ws / ".venv").symlink_to(venv.resolve())
+    return commit
+
+
+def write_params(ws: Path, preset: Path, overrides: dict) -> dict:
+    """The workspace's ``params.yaml``: its committed one, the preset, then ``overrides``."""
+    base = yaml.safe_load(git("show", "HEAD:params.yaml", cwd=ws))
+    params = merge(merge(base, yaml.safe_load(preset.read_text()) or {}), overrides)
+    text = ("# The paper preset: params.yaml with params.paper.yaml applied (tools/paper.py).\n"
+            + yaml.safe_dump(params, sort_keys=False))
+    path = ws / "params.yaml"
+    if not path.exists() or path.read_text() != text:  # unchanged bytes: no needless rerun
+        path.write_text(text)
+    return params
+
+
+def append_segment(ws: Path, segment: dict) -> list[dict]:
+    path = ws / "logs" / "paper-segments.json"
+    segments = json.loads(path.read_text()) if path.exists() else []
+    segments.append(segment)
+    path.parent.mkdir(exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(segments, indent=1))
+    tmp.replace(path)
+    return segments
+
+
+def run_segment(ws: Path, commit: str, cmd: list[str], kind: str, log: Path) -> int:
+    """``cmd`` in the workspace under the monitor; its figures appended as a segment."""
+    env = dict(os.environ, PATH=f"{ws / '.venv' / 'bin'}{os.pathsep}{os.environ['PATH']}")
+    print(f"paper: {' '.join(cmd)} in {ws} (log {log})", flush=True)
+    started = time.time()
+    mon = TreeMonitor()
+    rc, wall, stages = _run_teed(cmd, ws, env, log, mon)
+    append_segment(ws, {"kind": kind, "commit": commit, "started_unix": round(started),
+                        "wall_s": wall, "exit_code": rc, "stages": stages})
+    return rc
+
+
+def _run_teed(cmd, ws, env, log, mon):
+    """:func:`tools.scaling.run_monitored` with the log appended to (a resumed run keeps the
+    earlier segments' lines) and shown as it grows when stdout is a terminal."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "a") as out:
+        out.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} {' '.join(cmd)}\n")
+    tail = subprocess.Popen(["tail", "-n", "0", "-f", str(log)]) if sys.stdout.isatty() else None
+    try:
+        return run_monitored(cmd, ws, env, log, mon, append=True)
+    finally:
+        if tail:
+            tail.terminate()
+
+
+def up_to_date(ws: Path) -> bool:
+    out = subprocess.run([str(ws / ".venv" / "bin" / "dvc"), "status", "--quiet"], cwd=ws)
+    return out.returncode == 0
+
+
+def stage_totals(segments: list[dict], commit: str) -> dict[str, dict]:
+    """Each stage's wall and CPU seconds summed over the pipeline segments of ``commit`` (a
+    stage killed and resumed counts both parts) and its largest peak memory."""
+    out: dict[str, dict] = {}
+    for seg in segments:
+        if seg["commit"] != commit or seg["kind"] != "pipeline":
+            continue
+        for name, s in seg["stages"].items():
+            t = out.setdefault(name, {"wall_s": 0.0, "cpu_s": 0.0, "peak_rss_mb": 0.0,
+                                      "segments": 0})
+            t["wall_s"] += s["wall_s"]
+            t["cpu_s"] += s["cpu_s"]
+            t["peak_rss_mb"] = max(t["peak_rss_mb"], s["peak_rss_mb"])
+            t["segments"] += 1
+    return {name: out[name] for name in STAGES if name in out}
+
+
+def collect(ws: Path, dest: Path, commit: str) -> dict:
+    """The workspace's reports, params, lock and run figures into ``dest`` (replaced whole)."""
+    segments = json.loads((ws / "logs" / "paper-segments.json").read_text())
+    totals = stage_totals(segments, commit)
+    seeds = [s for s in segments if s["commit"] == commit and s["kind"] == "seeds"]
+    run = {
+        "commit": commit,
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
+                   f"{psutil.virtual_memory().total / 2**30:.0f} GiB",
+        "stages": totals,
+        "pipeline_wall_s": sum(t["wall_s"] for t in totals.values()),
+        "seeds_wall_s": sum(s["wall_s"] for s in seeds) if seeds else None,
+        "segments": [{k: v for k, v in s.items() if k != "stages"} for s in segments
+                     if s["commit"] == commit],
+    }
+    tmp = dest.with_name(dest.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    shutil.copytree(ws / "reports", tmp, ignore=shutil.ignore_patterns("bench", "tests"))
+    for name in ("params.yaml", "dvc.lock"):
+        shutil.copy2(ws / name, tmp / name)
+    (tmp / "run.json").write_text(json.dumps(run, indent=1, sort_keys=True) + "\n")
+    (tmp / "README.md").write_text(summary(run))
+    shutil.rmtree(dest, ignore_errors=True)
+    tmp.replace(dest)
+    return run
+
+
+def summary(run: dict) -> str:
+    lines = [
+        "# The paper preset's run (`make paper`)", "",
+        f"Commit `{run['commit'][:7]}`, {run['machine']}; the parameters are "
+        "[`params.yaml`](params.yaml) (the committed default with `params.paper.yaml` "
+        "applied) and the outputs' hashes [`dvc.lock`](dvc.lock). Each stage's report is in "
+        "its folder here.", "",
+        "| stage | wall (min) | CPU (min) | peak RSS (MB) | segments |", "|---|---|---|---|---|",
+    ]
+    for name, t in run["stages"].items():
+        lines.append(f"| [`{name}`]({name}/report.md) | {t['wall_s'] / 60:.1f} | "
+                     f"{t['cpu_s'] / 60:.1f} | {t['peak_rss_mb']:.0f} | {t['segments']} |")
+    lines.append(f"| **pipeline** | **{run['pipeline_wall_s'] / 60:.1f}** | | | |")
+    if run["seeds_wall_s"] is not None:
+        lines.append(f"| extra training seeds (`tools.seed_sweep`, then `sim_eval`) | "
+                     f"{run['seeds_wall_s'] / 60:.1f} | | | |")
+    lines += ["", "Wall time is the stage's process tree from its first to its last sighting "
+              "(polled every 0.5 s), summed over the segments (a killed and resumed stage has "
+              "two); set-up (the environment) is not included.", ""]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="tools.paper", description=__doc__.splitlines()[0])
+    ap.add_argument("--workspace", type=Path, default=ROOT / "paper")
+    ap.add_argument("--source", type=Path, default=ROOT, help="the git checkout whose HEAD runs")
+    ap.add_argument("--preset", type=Path, default=PRESET)
+    ap.add_argument("--reports", type=Path, default=ROOT / "reports" / "paper",
+                    help="where the collected reports go")
+    ap.add_argument("-S", "--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="one more parameter override, e.g. -S compute.backend=dask")
+    ap.add_argument("--until", default=None, metavar="STAGE",
+                    help="stop after this stage (nothing is collected)")
+    ap.add_argument("--seeds", type=int, default=1,
+                    help="training seeds in all for the learned methods (1: the pipeline's own)")
+    ap.add_argument("--collect-only", action="store_true")
+    args = ap.parse_args(argv)
+    ws = args.workspace.resolve()
+    commit = sync_workspace(args.source.resolve(), ws)
+    write_params(ws, args.preset, set_overrides(args.set))
+    log = ws / "logs" / "paper.log"
+    dvc = str(ws / ".venv" / "bin" / "dvc")
+    if not args.collect_only:
+        target = [args.until] if args.until else []
+        rc = run_segment(ws, commit, [dvc, "repro", *target], "pipeline", log)
+        if rc:
+            print(f"ERROR: dvc repro exited {rc} in {ws}; see {log}", file=sys.stderr)
+            return rc
+        if args.until:
+            return 0
+        if args.seeds > 1:
+            py = str(ws / ".venv" / "bin" / "python")
+            for cmd in ([py, "-m", "tools.seed_sweep", "--seeds", str(args.seeds)],
+                        [dvc, "repro", "sim_eval"]):
+                if rc := run_segment(ws, commit, cmd, "seeds", log):
+                    print(f"ERROR: {' '.join(cmd)} exited {rc}; see {log}", file=sys.stderr)
+                    return rc
+    if not up_to_date(ws):
+        print(f"ERROR: {ws}: the pipeline is not up to date (dvc status); run make paper",
+              file=sys.stderr)
+        return 2
+    run = collect(ws, args.reports, commit)
+    print(f"paper: pipeline {run['pipeline_wall_s'] / 60:.1f} min; reports in {args.reports}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
