@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 UV_VERSION := $(shell sed -n 's/^uv==//p' requirements.lock)
 
-.PHONY: env lock repro test bench review seeds val-sim camera mutation train-diagnostics clean-env
+.PHONY: env lock repro paper test bench review seeds val-sim camera mutation train-diagnostics clean-env
 
 env: $(STAMP)
 
@@ -58,6 +58,14 @@ repro: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+SEEDS ?= 3
+paper: $(STAMP)
+	@# the paper preset (params.paper.yaml over params.yaml) end to end in its own workspace,
+	@# paper/ (a clone of HEAD with its own dvc.lock and data/), then SEEDS training seeds in
+	@# all for the learned methods; reports into reports/paper/. Resumable: run it again.
+	@# Hours on 2 cores (docs/presets.md). Overrides: make paper ARGS='-S compute.n_workers=4'
+	$(BIN)/python -m tools.paper --seeds $(SEEDS) $(ARGS)
 
 
 bench: $(STAMP)

@@ -36,12 +36,14 @@ from pathlib import Path
 import psutil
 import yaml
 
-from tools.scaling import TreeMonitor, run_monitored
+from tools.scaling import POLL_S, TreeMonitor
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESET = ROOT / "params.paper.yaml"
 STAGES = ("mesh_gen", "contact_sim", "rotation_extraction", "rrt_skts", "render_views",
           "affordance_maps", "clustering", "train", "train_baselines", "sim_eval")
+#: How often a running segment's figures are saved (s): what a kill loses at most.
+SAVE_S = 5.0
 
 
 def git(*args: str, cwd: Path) -> str:
@@ -122,37 +124,74 @@ def append_segment(ws: Path, segment: dict) -> list[dict]:
     path = ws / "logs" / "paper-segments.json"
     segments = json.loads(path.read_text()) if path.exists() else []
     segments.append(segment)
-    path.parent.mkdir(exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(segments, indent=1))
-    tmp.replace(path)
+    write_json(path, segments)
     return segments
 
 
+def write_json(path: Path, value) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(value, indent=1))
+    tmp.replace(path)
+
+
 def run_segment(ws: Path, commit: str, cmd: list[str], kind: str, log: Path) -> int:
-    """``cmd`` in the workspace under the monitor; its figures appended as a segment."""
+    """``cmd`` in the workspace under the monitor; its figures appended as a segment. While it
+    runs they are kept in ``logs/paper-segment.partial.json`` (every :data:`SAVE_S`), so a
+    killed run's segment is appended, with ``exit_code`` null, by the next one; they are also
+    saved as soon as a stage is first seen, so a stage killed in its first seconds counts."""
+    partial = ws / "logs" / "paper-segment.partial.json"
+    if partial.exists():
+        append_segment(ws, json.loads(partial.read_text()))
+        partial.unlink()
     env = dict(os.environ, PATH=f"{ws / '.venv' / 'bin'}{os.pathsep}{os.environ['PATH']}")
     print(f"paper: {' '.join(cmd)} in {ws} (log {log})", flush=True)
-    started = time.time()
-    mon = TreeMonitor()
-    rc, wall, stages = _run_teed(cmd, ws, env, log, mon)
-    append_segment(ws, {"kind": kind, "commit": commit, "started_unix": round(started),
-                        "wall_s": wall, "exit_code": rc, "stages": stages})
-    return rc
-
-
-def _run_teed(cmd, ws, env, log, mon):
-    """:func:`tools.scaling.run_monitored` with the log appended to (a resumed run keeps the
-    earlier segments' lines) and shown as it grows when stdout is a terminal."""
     log.parent.mkdir(parents=True, exist_ok=True)
+    segment = {"kind": kind, "commit": commit, "cmd": cmd[1:], "started_unix": round(time.time()),
+               "wall_s": 0.0, "exit_code": None, "stages": {}}
+    mon, t0, saved = TreeMonitor(), time.monotonic(), 0.0
     with open(log, "a") as out:
         out.write(f"\n=== {time.strftime('%Y-%m-%d %H:%M:%S')} {' '.join(cmd)}\n")
-    tail = subprocess.Popen(["tail", "-n", "0", "-f", str(log)]) if sys.stdout.isatty() else None
+        out.flush()
+        proc = subprocess.Popen(cmd, cwd=ws, env=env, stdout=out, stderr=subprocess.STDOUT)
+        root = psutil.Process(proc.pid)
+        while proc.poll() is None:
+            now = time.monotonic() - t0
+            seen = len(mon.stages)
+            mon.poll(root, now)
+            if now - saved >= SAVE_S or len(mon.stages) > seen:  # a stage begins: saved at once
+                write_json(partial, segment | {"wall_s": now, "stages": mon.result()})
+                saved = now
+            time.sleep(POLL_S)
+    append_segment(ws, segment | {"wall_s": time.monotonic() - t0, "exit_code": proc.returncode,
+                                  "stages": mon.result()})
+    partial.unlink(missing_ok=True)
+    return proc.returncode
+
+
+def clear_stale_rwlock(ws: Path) -> None:
+    """Remove DVC's ``.dvc/tmp/rwlock`` when every process it names is gone: a killed run
+    leaves it behind, and DVC counts a killed process that nobody reaped (a zombie, where the
+    container's init does not reap) as alive, refusing to run."""
+    path = ws / ".dvc" / "tmp" / "rwlock"
+    if not path.exists():
+        return
     try:
-        return run_monitored(cmd, ws, env, log, mon, append=True)
-    finally:
-        if tail:
-            tail.terminate()
+        lock = json.loads(path.read_text() or "{}")
+    except json.JSONDecodeError:
+        lock = {}
+    infos = [*lock.get("write", {}).values(),
+             *(i for infos in lock.get("read", {}).values() for i in infos)]
+    if not any(_alive(i.get("pid")) for i in infos):
+        print(f"paper: removing {path}, left by a killed run", flush=True)
+        path.unlink()
+
+
+def _alive(pid) -> bool:
+    try:
+        return psutil.Process(int(pid)).status() != psutil.STATUS_ZOMBIE
+    except (psutil.NoSuchProcess, TypeError, ValueError):
+        return False
 
 
 def up_to_date(ws: Path) -> bool:
@@ -197,7 +236,7 @@ def collect(ws: Path, dest: Path, commit: str) -> dict:
     shutil.copytree(ws / "reports", tmp, ignore=shutil.ignore_patterns("bench", "tests"))
     for name in ("params.yaml", "dvc.lock"):
         shutil.copy2(ws / name, tmp / name)
-    (tmp / "run.json").write_text(json.dumps(run, indent=1, sort_keys=True) + "\n")
+    (tmp / "run.json").write_text(json.dumps(run, indent=1) + "\n")  # stages in pipeline order
     (tmp / "README.md").write_text(summary(run))
     shutil.rmtree(dest, ignore_errors=True)
     tmp.replace(dest)
@@ -246,6 +285,7 @@ def main(argv=None) -> int:
     write_params(ws, args.preset, set_overrides(args.set))
     log = ws / "logs" / "paper.log"
     dvc = str(ws / ".venv" / "bin" / "dvc")
+    clear_stale_rwlock(ws)
     if not args.collect_only:
         target = [args.until] if args.until else []
         rc = run_segment(ws, commit, [dvc, "repro", *target], "pipeline", log)

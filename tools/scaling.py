@@ -93,11 +93,11 @@ class TreeMonitor:
 
 
 def run_monitored(cmd: list[str], cwd: Path, env: dict | None = None,
-                  log: Path | None = None, mon: "TreeMonitor | None" = None,
-                  append: bool = False) -> tuple[int, float, dict]:
+                  log: Path | None = None, mon: "TreeMonitor | None" = None
+                  ) -> tuple[int, float, dict]:
     """Run ``cmd``; return (exit code, wall seconds, :meth:`TreeMonitor.result`)."""
     mon, t0 = mon or TreeMonitor(), time.monotonic()
-    with open(log or "/dev/null", "a" if append else "w") as out:
+    with open(log or "/dev/null", "w") as out:
         proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT)
         root = psutil.Process(proc.pid)
         while proc.poll() is None:

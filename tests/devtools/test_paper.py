@@ -1,0 +1,148 @@
+"""``make paper``'s path (tools/paper.py) on a tiny paper-like preset: a run killed in the
+middle of a stage, run again, ends with the outputs of an uninterrupted run (the session's
+``tiny_dataset``, made by the stages' own ``main`` on the same parameters), and its reports
+are collected with the commit and every stage's figures."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tests.conftest import TINY, assert_same_tree
+from tools.paper import merge, set_overrides, stage_totals
+
+pytestmark = pytest.mark.slow
+ROOT = Path(__file__).resolve().parents[2]
+EARLY = ("mesh_gen", "contact_sim", "rotation_extraction", "rrt_skts")
+
+
+def _source_repo(dest: Path) -> Path:
+    """A git repository whose one commit is this checkout's working tree (tracked and
+    untracked, not ignored files): the code under test, committed, as make paper needs."""
+    files = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=ROOT,
+                           check=True, capture_output=True).stdout.decode().split("\0")
+    for name in filter(None, files):
+        if (ROOT / name).is_file():
+            (dest / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, dest / name)
+    (dest / ".venv").symlink_to(ROOT / ".venv")
+    git = ["git", "-c", "user.name=test", "-c", "user.email=test@example.com"]
+    for cmd in (["init", "-q"], ["add", "-A"], ["commit", "-q", "-m", "code under test"]):
+        subprocess.run([*git, *cmd], cwd=dest, check=True)
+    return dest
+
+
+def _paper(src: Path, ws: Path, preset: Path, reports: Path, *extra: str) -> list[str]:
+    return [sys.executable, "-m", "tools.paper", "--source", str(src), "--workspace", str(ws),
+            "--preset", str(preset), "--reports", str(reports), *extra]
+
+
+#: The tiny preset: ``TINY`` (params.yaml's further training supports off, as TINY has
+#: none); after rrt_skts (compared with ``tiny_dataset``) fewer methods, for time.
+PRESET = merge(TINY, {"train_baselines": {"models": ["vatmart"]},
+                      "sim_eval": {"methods": ["oracle", "sctdn", "vatmart"]}})
+PRESET["mesh_gen"] = {**PRESET["mesh_gen"], "n_extra_train_supports": 0}
+
+
+@pytest.fixture(scope="module")
+def paper_runs(tmp_path_factory):
+    """(source, killed-and-resumed workspace, collected reports, items saved at the kill)."""
+    tmp = tmp_path_factory.mktemp("paper")
+    src = _source_repo(tmp / "src")
+    preset = tmp / "tiny.yaml"
+    preset.write_text(yaml.safe_dump(PRESET))
+    killed, reports = tmp / "ws_killed", tmp / "reports"
+    proc = subprocess.Popen(_paper(src, killed, preset, reports), cwd=ROOT,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    work = killed / "data" / ".work" / "rrt_skts"
+    try:
+        deadline = time.monotonic() + 600
+        while not list(work.glob("*/*.pkl")):
+            assert proc.poll() is None, "make paper ended before rrt_skts saved an item: " + \
+                proc.stderr.read().decode()[-2000:]
+            assert time.monotonic() < deadline, "rrt_skts saved no item in 600 s"
+            time.sleep(0.05)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    saved = len(list(work.glob("*/*.pkl")))
+    assert not (killed / "data" / "rrt_skts" / "skts.parquet").exists(), "killed too late"
+    subprocess.run(_paper(src, killed, preset, reports), cwd=ROOT, check=True,
+                   stdout=subprocess.DEVNULL)
+    return src, killed, reports, saved
+
+
+def test_killed_paper_run_resumes_to_the_uninterrupted_outputs(paper_runs, tiny_dataset):
+    src, killed, _, saved = paper_runs
+    _, data, stage_reports = tiny_dataset
+    assert saved >= 1
+    for stage in EARLY:
+        assert_same_tree(killed / "data" / stage, data / stage)
+        assert (killed / "reports" / stage / "metrics.json").read_bytes() == \
+            (stage_reports / stage / "metrics.json").read_bytes()
+    # the run is the committed code with the preset over the committed params.yaml
+    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=src, check=True,
+                            capture_output=True, text=True).stdout.strip()
+    assert subprocess.run(["git", "rev-parse", "HEAD"], cwd=killed, capture_output=True,
+                          text=True).stdout.strip() == commit
+    params = yaml.safe_load((killed / "params.yaml").read_text())
+    assert params == merge(yaml.safe_load((src / "params.yaml").read_text()), PRESET)
+    # the default workspace of the source is untouched
+    assert not (src / "data" / "mesh_gen").exists()
+
+
+def test_reports_are_collected_with_commit_and_stage_figures(paper_runs):
+    src, killed, reports, _ = paper_runs
+    run = json.loads((reports / "run.json").read_text())
+    stages = ["mesh_gen", "contact_sim", "rotation_extraction", "rrt_skts", "render_views",
+              "affordance_maps", "clustering", "train", "train_baselines", "sim_eval"]
+    assert list(run["stages"]) == stages
+    for stage in stages:
+        assert (reports / stage / "metrics.json").read_bytes() == \
+            (killed / "reports" / stage / "metrics.json").read_bytes()
+        assert run["stages"][stage]["wall_s"] > 0 and run["stages"][stage]["peak_rss_mb"] > 0
+    # rrt_skts ran in two segments (killed, then resumed); the stages before it in one
+    assert run["stages"]["rrt_skts"]["segments"] == 2
+    assert run["stages"]["mesh_gen"]["segments"] == 1
+    assert [s["exit_code"] != 0 for s in run["segments"]] == [True, False]
+    assert run["commit"] == subprocess.run(["git", "rev-parse", "HEAD"], cwd=src, check=True,
+                                           capture_output=True, text=True).stdout.strip()
+    assert (reports / "dvc.lock").read_bytes() == (killed / "dvc.lock").read_bytes()
+    assert "| **pipeline** |" in (reports / "README.md").read_text()
+    # run again on an up-to-date workspace: nothing reruns, the same reports
+    before = (reports / "sim_eval" / "metrics.json").read_bytes()
+    subprocess.run(_paper(src, killed, killed.parent / "tiny.yaml", reports, "--collect-only"),
+                   cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+    assert (reports / "sim_eval" / "metrics.json").read_bytes() == before
+
+
+def test_overrides_name_unknown_keys_and_parse_values():
+    assert set_overrides(["compute.backend=dask", "rrt_skts.n_skts_per_support=50"]) == \
+        {"compute": {"backend": "dask"}, "rrt_skts": {"n_skts_per_support": 50}}
+    assert merge({"a": {"b": 1, "c": 2}}, {"a": {"b": 3}}) == {"a": {"b": 3, "c": 2}}
+    with pytest.raises(SystemExit, match="a.x: not a key"):
+        merge({"a": {"b": 1}}, {"a": {"x": 3}})
+    with pytest.raises(SystemExit, match="expected section.key=value"):
+        set_overrides(["compute.backend"])
+
+
+def test_stage_totals_sum_segments_of_the_commit_only():
+    seg = {"kind": "pipeline", "commit": "c1", "stages": {
+        "rrt_skts": {"wall_s": 10.0, "cpu_s": 15.0, "peak_rss_mb": 100.0}}}
+    other = {**seg, "commit": "c0"}
+    seeds = {**seg, "kind": "seeds"}
+    second = {"kind": "pipeline", "commit": "c1", "stages": {
+        "rrt_skts": {"wall_s": 5.0, "cpu_s": 9.0, "peak_rss_mb": 300.0},
+        "mesh_gen": {"wall_s": 1.0, "cpu_s": 1.0, "peak_rss_mb": 50.0}}}
+    totals = stage_totals([other, seg, seeds, second], "c1")
+    assert list(totals) == ["mesh_gen", "rrt_skts"]  # pipeline order
+    assert totals["rrt_skts"] == {"wall_s": 15.0, "cpu_s": 24.0, "peak_rss_mb": 300.0,
+                                  "segments": 2}
