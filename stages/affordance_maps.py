@@ -15,7 +15,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from skt_lib.config import LEVELS, load_params
+from skt_lib.config import LEVELS, load_sections
+from skt_lib.config.affordance_maps import AffordanceMapsParams
 from skt_lib.io import read_npz, read_table, write_npz_atomic
 from skt_lib.labels.affordance import affordance, hanging_part
 from skt_lib.perception.views import RENDER_SPEC
@@ -33,7 +34,7 @@ HIST_BINS = 20  # affordance histogram bins over [0, 1] in the recording
 
 def main(argv=None) -> int:
     args = parse_args("affordance_maps", argv)
-    p = load_params(args.params).affordance_maps
+    p = load_sections(args.params, affordance_maps=AffordanceMapsParams).affordance_maps
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     supports = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")
     contacts = read_table(root / "contact_sim" / "contacts.parquet", CONTACTS)

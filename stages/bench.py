@@ -42,7 +42,7 @@ from pathlib import Path
 
 from skt_lib import speed
 from skt_lib.cli.predict import median_predict_ms
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.io import read_npz, write_json_atomic
 from skt_lib.perception.views import RENDER_SPEC
 from skt_lib.planning import bench as planner_bench

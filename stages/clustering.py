@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skt_lib.config import load_params
+from skt_lib.config import CommonParams, load_sections
+from skt_lib.config.clustering import ClusteringParams
 from skt_lib.geometry.export import read_obj
 from skt_lib.io import read_table, write_npz_atomic, write_table
 from skt_lib.labels.families import fit_families
@@ -33,7 +34,7 @@ log = logging.getLogger("clustering")
 
 def main(argv=None) -> int:
     args = parse_args("clustering", argv)
-    params = load_params(args.params)
+    params = load_sections(args.params, common=CommonParams, clustering=ClusteringParams)
     p = params.clustering
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     supports = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")

@@ -14,7 +14,9 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from skt_lib.config import LEVELS, load_params
+from skt_lib.config import LEVELS, CommonParams, ComputeParams, load_sections
+from skt_lib.config.contact_sim import ContactSimParams
+from skt_lib.config.physics import DampingOnly
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import pose_matrix
 from skt_lib.io import read_table, write_table
@@ -30,7 +32,8 @@ log = logging.getLogger("contact_sim")
 
 def main(argv=None) -> int:
     args = parse_args("contact_sim", argv)
-    params = load_params(args.params)
+    params = load_sections(args.params, common=CommonParams, compute=ComputeParams,
+                           contact_sim=ContactSimParams, sim_eval=DampingOnly)
     p, seed = params.contact_sim, params.common.seed
     src, out, rep = Path(args.data_root) / "mesh_gen", Path(args.data_dir), Path(args.reports_dir)
     supports = read_table(src / "supports.parquet", SUPPORTS)

@@ -13,7 +13,8 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from skt_lib.config import LEVELS, OBJECT_CATEGORIES, load_params
+from skt_lib.config import LEVELS, OBJECT_CATEGORIES, CommonParams, ComputeParams, load_sections
+from skt_lib.config.mesh_gen import MeshGenParams
 from skt_lib.geometry.build import OBJECT_RGBA, SUPPORT_RGBA, ObjectTask, SupportTask, build_object, build_support
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.splits import assign_splits
@@ -31,7 +32,8 @@ GALLERY_PER_GROUP = 8
 
 def main(argv=None) -> int:
     args = parse_args("mesh_gen", argv)
-    params = load_params(args.params)
+    params = load_sections(args.params, common=CommonParams, compute=ComputeParams,
+                           mesh_gen=MeshGenParams)
     p, seed = params.mesh_gen, params.common.seed
     out, rep = Path(args.data_dir), Path(args.reports_dir)
     for sub in ("supports", "objects"):

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skt_lib.config import LEVELS, load_params
+from skt_lib.config import LEVELS, CommonParams, ComputeParams, load_sections
+from skt_lib.config.render_views import RenderViewsParams
 from skt_lib.errors import DataError
 from skt_lib.geometry.build import SUPPORT_RGBA
 from skt_lib.geometry.export import read_obj
@@ -36,7 +37,8 @@ VIEW_RGB = [(60, 120, 220), (220, 90, 40), (40, 170, 90), (200, 60, 170), (200, 
 
 def main(argv=None) -> int:
     args = parse_args("render_views", argv)
-    params = load_params(args.params)
+    params = load_sections(args.params, common=CommonParams, compute=ComputeParams,
+                           render_views=RenderViewsParams)
     p, seed = params.render_views, params.common.seed
     src, out, rep = Path(args.data_root) / "mesh_gen", Path(args.data_dir), Path(args.reports_dir)
     supports = read_table(src / "supports.parquet", SUPPORTS)

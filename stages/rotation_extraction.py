@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skt_lib.config import OBJECT_CATEGORIES, load_params
+from skt_lib.config import OBJECT_CATEGORIES, load_sections
+from skt_lib.config.rotation_extraction import RotationExtractionParams
 from skt_lib.errors import DataError
 from skt_lib.geometry.build import OBJECT_RGBA
 from skt_lib.geometry.export import read_obj
@@ -31,7 +32,7 @@ log = logging.getLogger("rotation_extraction")
 
 def main(argv=None) -> int:
     args = parse_args("rotation_extraction", argv)
-    params = load_params(args.params)
+    params = load_sections(args.params, rotation_extraction=RotationExtractionParams)
     p = params.rotation_extraction
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     objects = read_table(root / "mesh_gen" / "objects.parquet", OBJECTS).set_index("object_id")

@@ -16,7 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from skt_lib.config import LEVELS, load_params
+from skt_lib.config import LEVELS, CommonParams, ComputeParams, load_sections
+from skt_lib.config.rrt_skts import RrtSktsParams
+from skt_lib.config.waypoints import WaypointsOnly
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import matrix_pose, pose_matrix
 from skt_lib.geometry.skt import arc_length
@@ -34,7 +36,8 @@ SWEEP_TOL_M = 0.003
 
 def main(argv=None) -> int:
     args = parse_args("rrt_skts", argv)
-    params = load_params(args.params)
+    params = load_sections(args.params, common=CommonParams, compute=ComputeParams,
+                           rrt_skts=RrtSktsParams, clustering=WaypointsOnly)
     p, seed = params.rrt_skts, params.common.seed
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     supports = read_table(root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")

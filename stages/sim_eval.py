@@ -18,7 +18,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from skt_lib.config import load_params
+from skt_lib.config import CommonParams, ComputeParams, load_sections
+from skt_lib.config.clustering import ClusteringParams
+from skt_lib.config.contact_sim import ContactSimParams
+from skt_lib.config.rrt_skts import RrtSktsParams
+from skt_lib.config.sim_eval import SimEvalParams
 from skt_lib.errors import DataError
 from skt_lib.eval.coverage import multimodality_coverage
 from skt_lib.eval.methods import MODEL_OF, load_models, method_for
@@ -47,7 +51,9 @@ log = logging.getLogger("sim_eval")
 
 def main(argv=None) -> int:
     args = parse_args("sim_eval", argv)
-    params = load_params(args.params)
+    params = load_sections(args.params, common=CommonParams, compute=ComputeParams,
+                           contact_sim=ContactSimParams, clustering=ClusteringParams,
+                           rrt_skts=RrtSktsParams, sim_eval=SimEvalParams)
     p = params.sim_eval
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     T = params.clustering.T

@@ -15,7 +15,8 @@ import numpy as np
 import torch
 from dvclive import Live
 
-from skt_lib.config import load_params
+from skt_lib.config import CommonParams, load_sections
+from skt_lib.config.train import TrainParams
 from skt_lib.learning.data import load_training_set
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.learning.train import from_params, intervals, predict_items, train_sctdn
@@ -30,7 +31,7 @@ log = logging.getLogger("train")
 
 def main(argv=None) -> int:
     args = parse_args("train", argv)
-    params = load_params(args.params)
+    params = load_sections(args.params, common=CommonParams, train=TrainParams)
     p = params.train
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     data = load_training_set(root)

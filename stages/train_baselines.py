@@ -21,7 +21,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from skt_lib.config import load_params
+from skt_lib.config import CommonParams, load_sections
+from skt_lib.config.proposals import ProposalsOnly
+from skt_lib.config.train import TrainParams
+from skt_lib.config.train_baselines import TrainBaselinesParams
 from skt_lib.learning.data import load_training_set
 from skt_lib.learning.pointnet2 import geometry_memo
 from skt_lib.learning.train import from_params
@@ -35,7 +38,8 @@ log = logging.getLogger("train_baselines")
 
 def main(argv=None) -> int:
     args = parse_args("train_baselines", argv)
-    params = load_params(args.params)
+    params = load_sections(args.params, common=CommonParams, train=TrainParams,
+                           train_baselines=TrainBaselinesParams, sim_eval=ProposalsOnly)
     p, pb = params.train, params.train_baselines
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     data = load_training_set(root)

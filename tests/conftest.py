@@ -3,7 +3,7 @@
 import pytest
 import yaml
 
-from skt_lib.config import parse_params
+from skt_lib.config.params_file import parse_params
 
 TINY = {
     "common": {"seed": 7},

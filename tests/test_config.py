@@ -2,7 +2,7 @@ from pathlib import Path
 
 import pytest
 
-from skt_lib.config import load_params, parse_params
+from skt_lib.config.params_file import load_params, parse_params
 from skt_lib.errors import ParamsError
 
 ROOT = Path(__file__).resolve().parents[1]

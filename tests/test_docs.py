@@ -13,7 +13,8 @@ import yaml
 from pydantic import BaseModel, create_model
 
 import skt_lib.schemas
-from skt_lib.config import CommonParams, Params
+from skt_lib.config import CommonParams
+from skt_lib.config.params_file import Params
 from skt_lib.io import TableSchema
 from tools import docs_results
 

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from skt_lib.config import parse_params
+from skt_lib.config.params_file import parse_params
 from skt_lib.errors import DataError, InputError
 from skt_lib.eval.user_items import load_user_items
 from skt_lib.items import OBJECT_RECORD, SUPPORT_RECORD, find_object, find_support, user_dir

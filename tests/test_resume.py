@@ -120,7 +120,7 @@ def test_item_keys_are_the_same_in_another_process(tiny_params):
     """Keys must not depend on hash randomisation (pickled sets do)."""
     from dataclasses import dataclass
 
-    code = ("import sys; from tests.conftest import TINY; from skt_lib.config import parse_params;"
+    code = ("import sys; from tests.conftest import TINY; from skt_lib.config.params_file import parse_params;"
             "from skt_lib.resume import ItemStore; p = parse_params(TINY);"
             "print(ItemStore.key(print, (p.rrt_skts, {'b', 'a', 'c'})))")
     keys = {subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,

@@ -56,7 +56,7 @@ def test_planner_bench_times_both_planners_on_the_same_supports(tiny_dataset):
     """rrt_bench on the tiny set: the one-tree planner and the per-SKT reference plan the same
     supports at the asked SKT count, the speed-up is their rates' ratio, and every bench key
     it writes has a row in the docs (tests/test_docs.py checks the committed file)."""
-    from skt_lib.config import load_params
+    from skt_lib.config.params_file import load_params
     from tools.docs_results import BENCH_ROWS, BENCH_SAMPLE
 
     params_path, data, _ = tiny_dataset
@@ -81,7 +81,7 @@ def test_sim_bench_leaves_out_trials_whose_set_up_found_no_grasp(tiny_dataset):
     from collections import Counter
 
     from skt_lib import speed
-    from skt_lib.config import load_params
+    from skt_lib.config.params_file import load_params
     from skt_lib.sim.execute import EXECUTORS
     from tools.docs_results import BENCH_ROWS, BENCH_SAMPLE
 

@@ -3,6 +3,8 @@ change there would leave the stage's results stale and ``dvc status`` silent."""
 
 from pathlib import Path
 
+import yaml
+
 from tools.stage_deps import ROOT, closure, missing
 
 
@@ -50,3 +52,46 @@ def test_caches_beside_the_code_are_not_part_of_a_dep():
         assert out.returncode == 0 and out.stdout.strip() == path, (path, out.stderr)
     assert subprocess.run([str(dvc), "check-ignore", "skt_lib/sim/ik_kernel.py"],
                           cwd=ROOT, capture_output=True).returncode == 1
+
+
+def _downstream(stages: dict) -> dict[str, set[str]]:
+    """Stage → the stages after it (those that read what it writes, and so on)."""
+    outs = {name: [ROOT / (o if isinstance(o, str) else next(iter(o))) for o in s.get("outs", [])]
+            for name, s in stages.items()}
+    reads = {name: {other for other, paths in outs.items() if other != name and any(
+        (ROOT / d) == o or o in (ROOT / d).parents or (ROOT / d) in o.parents
+        for d in s.get("deps", []) for o in paths)} for name, s in stages.items()}
+    after = {name: set() for name in stages}
+    changed = True
+    while changed:
+        changed = False
+        for name in stages:
+            for up in list(reads[name]):
+                new = ({name} | after[name]) - after[up]
+                if new:
+                    after[up] |= new
+                    changed = True
+    return after
+
+
+def test_a_section_of_the_config_reruns_only_its_stage_and_the_stages_after_it():
+    """Each stage's parameters are its own module (skt_lib/config/<stage>.py): only that stage,
+    its downstream and a stage that reads the whole section as its own params (train_baselines
+    trains with train's) depend on it, so editing one help string reruns no other stage."""
+    stages = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
+    after = _downstream(stages)
+    assert after["mesh_gen"] == set(stages) - {"mesh_gen"}  # the DAG is read right
+    assert after["sim_eval"] == set()
+    for name in stages:
+        module = f"skt_lib/config/{name}.py"
+        assert (ROOT / module).is_file(), f"{name}: no section module {module}"
+        readers = {s for s, st in stages.items() if module in st.get("deps", [])}
+        whole = {s for s, st in stages.items() if name in st.get("params", [])}
+        assert name in readers, f"{name} does not depend on its own section {module}"
+        assert readers <= {name} | after[name] | whole, \
+            f"{module}: stages before {name} depend on it: {sorted(readers - after[name] - {name})}"
+    # the fields an earlier stage reads from a later section are modules of their own
+    for module, reader in (("waypoints", "rrt_skts"), ("physics", "contact_sim"),
+                           ("proposals", "train_baselines")):
+        readers = {s for s, st in stages.items() if f"skt_lib/config/{module}.py" in st.get("deps", [])}
+        assert reader in readers and readers <= {reader} | after[reader], (module, readers)

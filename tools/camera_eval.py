@@ -34,7 +34,8 @@ import pandas as pd
 from tqdm import tqdm
 
 from skt_lib.cli.predict import predict_camera, predict_cloud
-from skt_lib.config import LEVELS, load_params
+from skt_lib.config import LEVELS
+from skt_lib.config.params_file import load_params
 from skt_lib.errors import InputError
 from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
 from skt_lib.eval.stats import bootstrap_mean_interval, paired_comparison, wilson_interval

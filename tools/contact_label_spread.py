@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.io import read_table, write_json_atomic
 from skt_lib.schemas import OBJECTS, SUPPORTS
 from skt_lib.sim.contact_sim import eval_damping, reference_task, simulate_hangs

@@ -15,7 +15,7 @@ import json
 import sys
 from pathlib import Path
 
-from skt_lib.config import METHODS
+from skt_lib.config.sim_eval import METHODS
 from tools import scaling
 
 ROOT = Path(__file__).resolve().parents[1]

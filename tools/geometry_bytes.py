@@ -20,7 +20,8 @@ import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from skt_lib.config import OBJECT_CATEGORIES, load_params
+from skt_lib.config import OBJECT_CATEGORIES
+from skt_lib.config.params_file import load_params
 from skt_lib.geometry.build import ObjectTask, SupportTask, build_object, build_support
 
 ROOT = Path(__file__).resolve().parents[1]

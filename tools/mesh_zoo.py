@@ -23,7 +23,7 @@ import numpy as np
 import pybullet_data
 import trimesh
 
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.geometry.convex import Mesh, box, sphere, tube, union
 from skt_lib.geometry.objects import sample_object
 from skt_lib.geometry.supports import PLATE_THICKNESS_M, _Path

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.geometry.se3 import invert

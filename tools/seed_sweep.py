@@ -28,7 +28,7 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.eval.methods import MODEL_OF
 from skt_lib.eval.protocol import per_pair
 from skt_lib.eval.seeds import SEEDED, inputs_key, runs_document

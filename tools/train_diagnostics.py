@@ -37,7 +37,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from skt_lib.config import LEVELS, load_params
+from skt_lib.config import LEVELS
+from skt_lib.config.params_file import load_params
 from skt_lib.io import read_npz, read_table
 from skt_lib.learning.data import load_supports
 from skt_lib.learning.predictor import SktPredictor

@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from skt_lib.config import LEVELS, load_params
+from skt_lib.config import LEVELS
+from skt_lib.config.params_file import load_params
 from skt_lib.eval.methods import FALLS_BACK_TO_STORED, MODEL_OF, PREDICTOR_OF, load_models, \
     make_method
 from skt_lib.eval.protocol import load_test_set, per_pair, predict_all, success_table, \

@@ -20,7 +20,8 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from skt_lib.cli.common import progress
-from skt_lib.config import METHODS, load_params
+from skt_lib.config.params_file import load_params
+from skt_lib.config.sim_eval import METHODS
 from skt_lib.errors import InputError
 from skt_lib.eval.methods import MODEL_OF, PRIVILEGED, PROPOSING, load_model, method_for, model_dir
 from skt_lib.eval.protocol import make_task, reference_points, trial_settings

@@ -20,7 +20,7 @@ import numpy as np
 import trimesh
 
 from skt_lib.cli.common import existing_file, progress
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.errors import InputError, MeshError
 from skt_lib.geometry.aperture import find_aperture, object_frame
 from skt_lib.geometry.build import OBJECT_RGBA

@@ -14,7 +14,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from skt_lib.config import LEVELS, ContactSimParams, SimEvalParams
+from skt_lib.config import LEVELS
+from skt_lib.config.contact_sim import ContactSimParams
+from skt_lib.config.sim_eval import SimEvalParams
 from skt_lib.errors import DataError
 from skt_lib.eval.methods import FALLS_BACK_TO_STORED, hand_of
 from skt_lib.geometry.export import read_obj

@@ -8,7 +8,8 @@ are relative to ``out_dir`` (the directory of the tables).
 from dataclasses import dataclass
 from pathlib import Path
 
-from skt_lib.config import LEVELS, MeshGenParams
+from skt_lib.config import LEVELS
+from skt_lib.config.mesh_gen import MeshGenParams
 from skt_lib.geometry.checks import check_parts, check_solid
 from skt_lib.geometry.convex import Mesh, union
 from skt_lib.geometry.export import mass_properties, read_obj, write_shape

@@ -27,7 +27,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from skt_lib.config import MeshGenParams
+from skt_lib.config.mesh_gen import MeshGenParams
 from skt_lib.errors import GenerationFailed, MeshError
 from skt_lib.geometry.convex import Mesh
 from skt_lib.geometry.supports import (

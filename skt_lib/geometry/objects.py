@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from skt_lib.config import MeshGenParams
+from skt_lib.config.mesh_gen import MeshGenParams
 from skt_lib.errors import GenerationFailed
 from skt_lib.geometry.convex import Mesh, box, hull, prism, rownorm3, sphere, tube
 

@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from skt_lib.config import LEVELS, MeshGenParams
+from skt_lib.config import LEVELS
+from skt_lib.config.mesh_gen import MeshGenParams
 from skt_lib.errors import GenerationFailed
 from skt_lib.geometry.convex import Mesh, box, norm3, rowdot3, rownorm3, sphere, tube
 

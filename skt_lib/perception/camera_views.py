@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from skt_lib.config import RenderViewsParams
+from skt_lib.config.render_views import RenderViewsParams
 from skt_lib.errors import InputError
 from skt_lib.geometry.convex import Mesh
 from skt_lib.geometry.se3 import transform_points

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skt_lib.config import RenderViewsParams
+from skt_lib.config.render_views import RenderViewsParams
 from skt_lib.geometry.export import read_obj
 from skt_lib.io import write_npz_atomic
 from skt_lib.perception.pointcloud import add_depth_noise, sample_to

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skt_lib.config import RrtSktsParams
+from skt_lib.config.rrt_skts import RrtSktsParams
 from skt_lib.errors import DataError
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import invert, pose_matrix

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 
-from skt_lib.config import ContactSimParams
+from skt_lib.config.contact_sim import ContactSimParams
 from skt_lib.geometry.se3 import matrix_pose, pose_matrix, random_rotation_small
 from skt_lib.seeding import item_rng
 from skt_lib.sim.hanging import G, HangCheck, Perturbation, check_hang, perturb, perturb_phases

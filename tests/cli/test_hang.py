@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from skt_lib.config import METHODS
+from skt_lib.config.sim_eval import METHODS
 from skt_lib.sim.execute import REASONS
 from tests.cli.conftest import EASY_SUPPORT, OBJECT, STAGES, run_skt
 

@@ -141,7 +141,7 @@ def test_training_views_pass_the_cloud_checks(tiny_dataset):
 def _camera_cloud(data_root, view: int = 10):
     """A depth camera's raw cloud (camera frame, the wall in view, the sensor model at its
     default severity) of the easy test support, with the true camera-to-support pose."""
-    from skt_lib.config import load_params
+    from skt_lib.config.params_file import load_params
     from skt_lib.geometry.export import read_obj
     from skt_lib.io import read_table
     from skt_lib.perception.sensor import CameraScene, Intrinsics, SensorModel, camera_view

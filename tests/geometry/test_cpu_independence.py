@@ -18,7 +18,7 @@ SCRIPT = r"""
 import hashlib
 from pathlib import Path
 import numpy as np
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.geometry.build import ObjectTask, SupportTask
 from skt_lib.geometry.convex import union
 from skt_lib.geometry.objects import sample_object

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.io import read_npz, read_table
 from skt_lib.labels.affordance import hanging_part, segmentation_map_naive
 from skt_lib.perception.views import RENDER_SPEC

@@ -9,7 +9,7 @@ from tests.perception.test_wall_frame import PEG
 def test_render_views_with_a_depth_camera_gives_support_frame_views(tmp_path):
     """``render_views.sensor_severity`` > 0: each view is what ``skt predict --camera`` makes
     of a camera's cloud — in the support frame, on the hook (not the wall), N points."""
-    from skt_lib.config import load_params
+    from skt_lib.config.params_file import load_params
     from skt_lib.geometry.export import obj_text
     from skt_lib.io import read_npz
     from skt_lib.perception.camera_views import camera_viewer

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.geometry.convex import box
 from skt_lib.geometry.export import read_obj, write_shape
 from skt_lib.geometry.se3 import invert, pose_matrix

@@ -5,7 +5,9 @@ from pathlib import Path
 
 import numpy as np
 
-from skt_lib.config import ContactSimParams, MeshGenParams, SimEvalParams
+from skt_lib.config.contact_sim import ContactSimParams
+from skt_lib.config.mesh_gen import MeshGenParams
+from skt_lib.config.sim_eval import SimEvalParams
 from skt_lib.eval.protocol import trial_settings
 from skt_lib.geometry.build import ObjectTask, build_object
 from skt_lib.geometry.export import read_obj

@@ -7,7 +7,7 @@ import numpy as np
 import pybullet as pb
 import pytest
 
-from skt_lib.config import load_params
+from skt_lib.config.params_file import load_params
 from skt_lib.geometry.se3 import pose_matrix, skt_rotation
 from skt_lib.io import read_table
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS

@@ -109,7 +109,7 @@ def test_predicate_rejects_an_object_still_in_the_gripper(tmp_path):
     ("methods", ["oracle", "oracle_hovering"], "sim_eval.methods"),
 ])
 def test_grasp_and_method_params_are_validated(tiny_dict, key, value, message):
-    from skt_lib.config import parse_params
+    from skt_lib.config.params_file import parse_params
     from skt_lib.errors import ParamsError
 
     tiny_dict["sim_eval"][key] = value

@@ -17,7 +17,7 @@ PERT = Perturbation(4.0, 240, 960, 0.02, 0.15, 120)
 
 
 def _ring_world(urdf_dir):
-    from skt_lib.config import MeshGenParams
+    from skt_lib.config.mesh_gen import MeshGenParams
     from skt_lib.geometry.build import ObjectTask, build_object
     from tests.conftest import TINY
 

@@ -7,7 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from skt_lib.config import LEVELS, load_params
+from skt_lib.config import LEVELS
+from skt_lib.config.params_file import load_params
 from skt_lib.eval.methods import make_method
 from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
 from skt_lib.io import read_npz, read_table, write_table
