@@ -31,7 +31,8 @@ from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
 from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn, wall_points
 from skt_lib.planning.route import arm_route, route_sampler
-from skt_lib.planning.threading import (ThreadingFailed, ThreadSettings, densify, plan_threading,
+from skt_lib.planning.smoothing import densify
+from skt_lib.planning.threading import (ThreadingFailed, ThreadSettings, plan_threading,
                                         plan_threading_many)
 from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SUPPORTS
@@ -113,9 +114,12 @@ def load_skt_tasks(root: Path, seed: int, p: RrtSktsParams, T: int) -> list[SktT
 
 
 def thread_settings(p: RrtSktsParams, probe_radius: float, T: int) -> ThreadSettings:
-    return ThreadSettings(p.step_m, p.max_turn_deg, p.lead_in_m, p.max_release_offset_m, p.check_step_m,
-                          probe_radius, p.goal_bias, p.surface_bias, p.max_checks,
-                          p.shortcut_steps, T, p.plane_bias, p.route_bias)
+    return ThreadSettings(step_m=p.step_m, max_turn_deg=p.max_turn_deg, lead_in_m=p.lead_in_m,
+                          max_release_offset_m=p.max_release_offset_m, check_step_m=p.check_step_m,
+                          probe_radius_m=probe_radius, goal_bias=p.goal_bias,
+                          surface_bias=p.surface_bias, max_checks=p.max_checks,
+                          shortcut_steps=p.shortcut_steps, T=T, plane_bias=p.plane_bias,
+                          route_bias=p.route_bias)
 
 
 def surface_sampler(mesh, max_offset_m: float):

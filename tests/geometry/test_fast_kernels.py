@@ -17,7 +17,7 @@ from skt_lib.geometry.skt import (
     skt_frames,
     skt_frames_naive,
 )
-from skt_lib.planning.threading import limit_direction
+from skt_lib.planning.frames import limit_direction
 
 
 def _unit_rows(rng, n):

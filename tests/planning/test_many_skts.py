@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from skt_lib.planning.skts import skt_diversity_m, start_points
-from skt_lib.planning.threading import exec_frames, exec_frames_kept, plan_threading, plan_threading_many
+from skt_lib.planning.frames import exec_frames, exec_frames_kept
+from skt_lib.planning.threading import plan_threading, plan_threading_many
 from tests.planning.test_threading import (PEG_R, SETTINGS, _assert_clear_and_within_limits,
                                            _scene, probe_collisions)
 

@@ -15,19 +15,11 @@ from skt_lib.geometry.objects import reference_object
 from skt_lib.geometry.se3 import invert, skt_rotation
 from skt_lib.planning.collision import MeshClearance
 from skt_lib.planning.probe import ProbeObject, add_probe, make_probe_collision_fn
-from skt_lib.planning.threading import (
-    ThreadingFailed,
-    ThreadSettings,
-    _Checker,
-    _quat,
-    _Sampler,
-    arrival_directions,
-    limit_direction,
-    plan_threading,
-    release_offsets,
-    threading_plane,
-    transport,
-)
+from skt_lib.planning.checker import Checker
+from skt_lib.planning.frames import limit_direction, rotation_quat, transport
+from skt_lib.planning.release import arrival_directions, release_offsets
+from skt_lib.planning.threading import ThreadingFailed, ThreadSettings, plan_threading
+from skt_lib.planning.tree import Sampler, threading_plane
 from skt_lib.geometry.skt import executed_path, interpolate, resample, skt_frames
 from skt_lib.sim.world import World
 
@@ -158,10 +150,10 @@ def test_threading_plane_is_vertical_and_holds_the_arrival_direction():
     assert threading_plane(straight_down) is None
 
 
-def _sampler(bias: float, plane) -> _Sampler:
+def _sampler(bias: float, plane) -> Sampler:
     s = ThreadSettings(**{**SETTINGS.__dict__, "goal_bias": 0.3, "plane_bias": bias})
     lo, hi = np.array([0.0, -0.1, -0.1]), np.array([0.3, 0.1, 0.2])
-    return _Sampler(lambda g: g.uniform(lo + 0.1, hi - 0.05), None, lo, hi, s, plane)
+    return Sampler(lambda g: g.uniform(lo + 0.1, hi - 0.05), None, lo, hi, s, plane)
 
 
 def test_plane_bias_moves_its_share_of_samples_onto_the_plane_and_nothing_else():
@@ -221,7 +213,7 @@ def test_arrival_directions_start_at_the_hanging_x_and_come_from_above():
 
 def test_checker_visits_exactly_the_executed_poses():
     seen = []
-    chk = _Checker(lambda p, q: seen.append((np.array(p), np.array(q))) or False, SETTINGS)
+    chk = Checker(lambda p, q: seen.append((np.array(p), np.array(q))) or False, SETTINGS)
     ra, rb = skt_rotation([-1.0, 0.2, -0.3]), skt_rotation([-1.0, -0.1, 0.1])
     pa, pb = np.array([0.1, 0.0, 0.05]), np.array([0.09, 0.002, 0.045])
     assert chk.segment(pa, pb, ra, rb)
@@ -236,7 +228,7 @@ def test_checker_visits_exactly_the_executed_poses():
 
 def test_quat_matches_scipy_and_limit_direction_bounds_the_turn():
     for r in Rotation.random(300, random_state=2):
-        q = _quat(r.as_matrix())
+        q = rotation_quat(r.as_matrix())
         assert min(np.abs(q - r.as_quat()).max(), np.abs(q + r.as_quat()).max()) < 1e-9
     rng = np.random.default_rng(0)
     prev = np.array([-1.0, 0.0, 0.0])
