@@ -54,7 +54,7 @@ def test_render_views_counts_failed_supports(monkeypatch, tmp_path):
                 "n_padded": int(task.support_id == "s3"),
                 "on_surface_rate": {"s0": 1.0, "s2": 0.5, "s3": 0.0}[task.support_id]}
 
-    monkeypatch.setattr(render_views, "load_params", lambda _: SimpleNamespace(
+    monkeypatch.setattr(render_views, "load_sections", lambda *_, **__: SimpleNamespace(
         render_views=p, common=SimpleNamespace(seed=1), compute=COMPUTE))
     monkeypatch.setattr(render_views, "read_table", lambda *a: supports)
     monkeypatch.setattr(render_views, "render_support", fake_render)
@@ -101,7 +101,7 @@ def test_contact_sim_counts_items_that_raise(monkeypatch, tmp_path):
                 "contact_support": [0.0, 0.0, 0.0], "goal_rank": 0 if ok else -1,
                 "goal_shift_m": 0.0 if ok else float("nan")}
 
-    monkeypatch.setattr(contact_sim, "load_params", lambda _: SimpleNamespace(
+    monkeypatch.setattr(contact_sim, "load_sections", lambda *_, **__: SimpleNamespace(
         contact_sim=p, common=SimpleNamespace(seed=1), compute=COMPUTE,
         sim_eval=SimpleNamespace(linear_damping=0.04, angular_damping=0.04,
                                  settle_linear_damping=1.0, settle_angular_damping=5.0)))
