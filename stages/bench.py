@@ -26,7 +26,7 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
   Trials whose set-up finds no grasp are left out of all three
   (``sim_bench_setup_failures_excluded``; :func:`skt_lib.speed.sim_bench` says why);
 - ``import_dense_s_median``: ``skt import-support`` / ``import-object`` of the mesh zoo's
-  ≥ 250k-face cases (:mod:`tools.mesh_zoo`), wall seconds per import, process start
+  ≥ 250k-face cases (:mod:`skt_lib.cli.mesh_zoo`), wall seconds per import, process start
   included, one at a time (``import_dense_s``: each; ``import_dense_failed``: any refused).
 Medians, because these machines are noisy. Each key's meaning: ``tools/docs_results.py``.
 """
@@ -41,6 +41,7 @@ import tempfile
 from pathlib import Path
 
 from skt_lib import speed
+from skt_lib.cli.mesh_zoo import bench_dense_imports
 from skt_lib.cli.predict import median_predict_ms
 from skt_lib.config.params_file import load_params
 from skt_lib.io import read_npz, write_json_atomic
@@ -48,7 +49,6 @@ from skt_lib.perception.views import RENDER_SPEC
 from skt_lib.planning import bench as planner_bench
 from skt_lib.speed import flow_bench, render_bench, sctdn_bench
 from stages._common import run_items
-from tools.mesh_zoo import bench_dense_imports
 
 
 def rrt_bench(params, root: Path, per_level: int, n_skts: int) -> dict:

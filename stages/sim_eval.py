@@ -21,10 +21,11 @@ import pandas as pd
 from skt_lib.config import CommonParams, ComputeParams, load_sections
 from skt_lib.config.clustering import ClusteringParams
 from skt_lib.config.contact_sim import ContactSimParams
+from skt_lib.config.render_views import RenderViewsParams
 from skt_lib.config.rrt_skts import RrtSktsParams
 from skt_lib.config.sim_eval import SimEvalParams
+from skt_lib.coverage import multimodality_coverage
 from skt_lib.errors import DataError
-from skt_lib.eval.coverage import multimodality_coverage
 from skt_lib.eval.methods import MODEL_OF, load_models, method_for
 from skt_lib.eval.metrics import sim_metrics
 from skt_lib.eval.protocol import (
@@ -34,7 +35,6 @@ from skt_lib.eval.protocol import (
     reference_points,
     trial_settings,
 )
-from skt_lib.eval.report import write_report
 from skt_lib.eval.rounds import pick_rollouts, replay, run_rounds
 from skt_lib.eval.seeds import seed_block
 from skt_lib.eval.user_items import load_user_items, run_user_trials, user_metrics
@@ -45,6 +45,7 @@ from skt_lib.sim.execute import run_trial
 from stages._common import item_store, parse_args, run_items
 from viz.report import write_metrics, write_run_log
 from viz.rollouts import log_rollouts
+from viz.sim_eval_report import write_report
 
 log = logging.getLogger("sim_eval")
 
@@ -53,7 +54,8 @@ def main(argv=None) -> int:
     args = parse_args("sim_eval", argv)
     params = load_sections(args.params, common=CommonParams, compute=ComputeParams,
                            contact_sim=ContactSimParams, clustering=ClusteringParams,
-                           rrt_skts=RrtSktsParams, sim_eval=SimEvalParams)
+                           rrt_skts=RrtSktsParams, render_views=RenderViewsParams,
+                           sim_eval=SimEvalParams)
     p = params.sim_eval
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     T = params.clustering.T

@@ -1,59 +1,83 @@
-"""The command line is the top layer of the library: no module of ``skt_lib`` outside
-``skt_lib/cli/`` imports ``skt_lib.cli`` (what both need lives below both, e.g.
-:mod:`skt_lib.items`), read from the source with ``ast`` so lazy imports count too."""
+"""The layer order of ``[tool.importlinter]`` in pyproject.toml holds: ``lint-imports`` (the
+import-linter command) passes on the project, every top-level module of ``skt_lib`` has a
+place in the order, and an upward or forbidden import in a copy of the project fails it.
 
-import ast
+import-linter reads every import statement, function-level (lazy) and relative ones too, and
+follows chains: ``a -> b -> c`` breaks a contract that forbids ``a -> c``."""
+
+import pkgutil
+import shutil
+import subprocess
+import sys
+import tomllib
 from pathlib import Path
+
+import pytest
 
 import skt_lib
 
-PACKAGE = Path(skt_lib.__file__).parent
-CLI = "skt_lib.cli"
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]
+LINT = "import sys; from importlinter.cli import lint_imports_command; sys.exit(lint_imports_command())"
 
 
-def _module(path: Path, package: Path) -> str:
-    rel = path.relative_to(package.parent).with_suffix("")
-    parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
-    return ".".join(parts)
+def lint_imports(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    """``lint-imports`` of this venv run in ``cwd`` (which it puts first on ``sys.path`` and
+    reads ``pyproject.toml`` from), no cache written."""
+    return subprocess.run([sys.executable, "-c", LINT, "--no-cache", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=300)
 
 
-def cli_imports(path: Path, package_dir: Path = PACKAGE) -> list[str]:
-    """``skt_lib.cli`` modules the file at ``path`` (in the package at ``package_dir``)
-    imports, absolutely or relatively: ``file:line: module`` each."""
-    name = _module(path, package_dir)
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found = []
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            targets = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
-                base = ".".join([*anchor, *([base] if base else [])])
-            targets = [base, *(f"{base}.{a.name}" for a in node.names)]
-        else:
-            continue
-        found += [f"{path.relative_to(package_dir.parent)}:{node.lineno}: {t}" for t in targets
-                  if t == CLI or t.startswith(CLI + ".")]
-    return found
+def _layered() -> set[str]:
+    (layers,) = [c["layers"] for c in CONFIG["contracts"] if c["type"] == "layers"]
+    return {m.strip() for layer in layers for part in layer.split("|") for m in part.split(":")}
 
 
-def test_nothing_below_the_cli_imports_it():
-    files = [p for p in sorted(PACKAGE.rglob("*.py")) if CLI.split(".")[1] not in
-             p.relative_to(PACKAGE).parts[:1]]
-    assert len(files) > 50  # the whole package, not an empty glob
-    assert [hit for f in files for hit in cli_imports(f)] == []
+def test_the_import_contracts_hold():
+    got = lint_imports(ROOT)
+    n = len(CONFIG["contracts"])
+    assert got.returncode == 0 and f"Contracts: {n} kept, 0 broken." in got.stdout, \
+        got.stdout + got.stderr
 
 
-def test_the_check_sees_each_way_of_importing(tmp_path):
-    lines = {"import skt_lib.cli.hang": True, "from skt_lib.cli import items": True,
-             "from skt_lib import cli": True, "from ..cli.common import progress": True,
-             "from . import cli": True, "from skt_lib import items": False,
-             "import skt_lib.client": False, "from ..clipping import x": False}
-    pkg = tmp_path / "skt_lib"
-    (pkg / "eval").mkdir(parents=True)
-    for i, (line, hit) in enumerate(lines.items()):
-        where = pkg / "eval" / f"m{i}.py" if line.startswith("from ..") else pkg / f"m{i}.py"
-        where.write_text(f"def f():\n    {line}\n")
-        assert bool(cli_imports(where, pkg)) == hit, line
+def test_every_top_level_module_has_a_layer():
+    """A new ``skt_lib/<name>.py`` or package is placed in the order, not left unchecked."""
+    top = {f"skt_lib.{m.name}" for m in pkgutil.iter_modules(skt_lib.__path__)}
+    assert len(top) > 15 and "skt_lib.cli" in top  # the whole package, not an empty listing
+    assert top - _layered() == set()
+    assert {"tools", "stages", "viz"} <= _layered() and set(CONFIG["root_packages"]) == {
+        "skt_lib", "viz", "stages", "tools"}
+
+
+#: (file, code appended to it, a line lint-imports must print): one way each of breaking a
+#: contract — upward (absolute, relative and lazy), between independent siblings, and the
+#: libraries the code below the command line must not import.
+BREAKS = [
+    ("skt_lib/geometry/se3.py", "import skt_lib.eval.methods",
+     "skt_lib.geometry is not allowed to import skt_lib.eval"),
+    ("skt_lib/eval/metrics.py", "def _lazy():\n    from ..cli.common import progress",
+     "skt_lib.eval is not allowed to import skt_lib.cli"),
+    ("skt_lib/learning/train.py", "from skt_lib.planning import skts",
+     "skt_lib.learning is not allowed to import skt_lib.planning"),
+    ("stages/bench.py", "from tools import docs_results",
+     "stages is not allowed to import tools"),
+    ("skt_lib/io.py", "from tqdm import tqdm", "skt_lib is not allowed to import tqdm"),
+    ("skt_lib/learning/flow.py", "import matplotlib.pyplot as plt",
+     "skt_lib is not allowed to import matplotlib"),
+    ("viz/figures.py", "def _lazy():\n    import tqdm", "viz is not allowed to import tqdm"),
+]
+
+
+@pytest.mark.parametrize("path, code, message", BREAKS, ids=[b[0] for b in BREAKS])
+def test_an_import_against_the_order_fails_it(tmp_path, path, code, message):
+    """The project copied (its packages and pyproject.toml) and one import added: lint-imports
+    exits non-zero and names the broken rule; the untouched copy passes."""
+    for package in CONFIG["root_packages"]:
+        shutil.copytree(ROOT / package, tmp_path / package,
+                        ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "pyproject.toml", tmp_path)
+    assert lint_imports(tmp_path).returncode == 0
+    target = tmp_path / path
+    target.write_text(target.read_text() + f"\n\n{code}\n")
+    got = lint_imports(tmp_path, "--config", str(tmp_path / "pyproject.toml"))
+    assert got.returncode != 0 and message in got.stdout, got.stdout + got.stderr

@@ -38,7 +38,6 @@ from skt_lib.config import LEVELS
 from skt_lib.config.params_file import load_params
 from skt_lib.errors import InputError
 from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
-from skt_lib.eval.stats import bootstrap_mean_interval, paired_comparison, wilson_interval
 from skt_lib.geometry.export import read_obj
 from skt_lib.geometry.se3 import invert, transform_points
 from skt_lib.io import write_json_atomic
@@ -48,6 +47,7 @@ from skt_lib.perception.views import support_cameras
 from skt_lib.perception.wall_frame import WallSettings
 from skt_lib.seeding import item_rng
 from skt_lib.sim.execute import run_trial
+from skt_lib.stats import bootstrap_mean_interval, paired_comparison, wilson_interval
 from stages._common import run_items
 from viz.report import Report, write_metrics
 

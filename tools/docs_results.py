@@ -79,7 +79,7 @@ BENCH_ROWS = {
     "sim_verdict_agreement_previous": ("{:.3f}", "the same for the previous executor"),
     "import_dense_s_median": ("{:.1f} s", "`skt import-support` / `import-object` of a ≥ 250k-"
                                           "face mesh (the mesh zoo's dense cases, "
-                                          "`tools/mesh_zoo.py`), process start included"),
+                                          "`skt_lib/cli/mesh_zoo.py`), process start included"),
     "import_dense_s": ("{}", "each of those imports (s)"),
 }
 BENCH_SAMPLE = ("machine", "rrt_bench_supports", "rrt_bench_skts", "rrt_bench_skts_reference",

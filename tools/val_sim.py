@@ -34,12 +34,12 @@ from skt_lib.eval.methods import FALLS_BACK_TO_STORED, MODEL_OF, PREDICTOR_OF, l
 from skt_lib.eval.protocol import load_test_set, per_pair, predict_all, success_table, \
     trial_settings
 from skt_lib.eval.rounds import run_rounds
-from skt_lib.eval.stats import paired_comparisons, success_ci95
 from skt_lib.io import write_json_atomic
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.learning.sctdn import Sctdn
 from skt_lib.seeding import item_rng
 from skt_lib.sim.execute import REASONS, run_trial
+from skt_lib.stats import paired_comparisons, success_ci95
 from stages._common import run_items
 
 

@@ -9,9 +9,9 @@ from skt_lib.config import LEVELS, OBJECT_CATEGORIES
 from skt_lib.eval.methods import PROPOSING
 from skt_lib.eval.orderings import check_orderings, explain
 from skt_lib.eval.protocol import SINGLE, success_table
-from skt_lib.eval.stats import paired_comparisons, success_ci95, support_ci95
 from skt_lib.seeding import item_rng
 from skt_lib.sim.execute import REASONS
+from skt_lib.stats import paired_comparisons, success_ci95, support_ci95
 
 
 def sim_metrics(trials: pd.DataFrame, pairs: pd.DataFrame, methods, n_proposals: int,

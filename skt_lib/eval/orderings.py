@@ -3,8 +3,8 @@ paired evidence, and success conditioned on what the privileged oracle can do.""
 
 import pandas as pd
 
-from skt_lib.eval.stats import paired_comparison, paired_support_interval
 from skt_lib.seeding import item_rng
+from skt_lib.stats import paired_comparison, paired_support_interval
 
 #: (claim, A, B, level, margin, strict): "A > B + margin" (strict) or "A ≥ B + margin" on
 #: ``level`` ("all": pooled), as the paper's Table I and II order them.

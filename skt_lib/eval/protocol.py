@@ -1,4 +1,4 @@
-"""The evaluation protocol (paper §V, DESIGN §5): the test set, one SKT per method and
+"""The evaluation protocol (paper §V, docs/design.md §5): the test set, one SKT per method and
 support, one trial per (method, test support, test object), success rates per level.
 
 The cloud each method sees is one rendered view of the support, drawn per support from the

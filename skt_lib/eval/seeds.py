@@ -29,8 +29,8 @@ from skt_lib.errors import DataError
 from skt_lib.eval.methods import LEARNED, PROPOSING
 from skt_lib.eval.orderings import PAPER_ORDERINGS, check_orderings
 from skt_lib.eval.protocol import SINGLE, success_table
-from skt_lib.eval.stats import bootstrap_mean_interval
 from skt_lib.seeding import item_rng
+from skt_lib.stats import bootstrap_mean_interval
 
 FORMAT = "skt-hang seed runs v1"
 #: The methods a training seed changes.
@@ -40,8 +40,8 @@ SEEDED = (*LEARNED, *PROPOSING)
 MODEL_STAGES = ("train", "train_baselines")
 #: sim_eval's code dependencies that only turn trials into reports and recordings; a change
 #: to them cannot change a trial's outcome, so they are left out of the key.
-REPORTING_ONLY = ("viz/", "skt_lib/eval/report.py", "skt_lib/eval/metrics.py",
-                  "skt_lib/eval/orderings.py", "skt_lib/eval/stats.py", "skt_lib/eval/seeds.py")
+REPORTING_ONLY = ("viz/", "skt_lib/eval/metrics.py", "skt_lib/eval/orderings.py",
+                  "skt_lib/stats.py", "skt_lib/eval/seeds.py")
 KEYS = ("all", *LEVELS)
 
 

@@ -8,10 +8,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from skt_lib.eval.stats import bootstrap_mean_interval, wilson_interval
 from skt_lib.learning.data import SupportData, normalise
 from skt_lib.learning.pointnet2 import geometry_memo
 from skt_lib.learning.sctdn import Sctdn, SctdnConfig, sctdn_loss, traj_distance
+from skt_lib.stats import bootstrap_mean_interval, wilson_interval
 
 
 @dataclass(frozen=True)

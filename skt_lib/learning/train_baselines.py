@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import torch
 
-from skt_lib.eval.coverage import coverage
+from skt_lib.coverage import coverage
 from skt_lib.learning.data import SupportData, normalise
 from skt_lib.learning.flow import (
     FlowConfig,

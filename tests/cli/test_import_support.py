@@ -10,10 +10,10 @@ import pytest
 import trimesh
 import yaml
 
+from skt_lib.cli.example_hooks import coat_hook, ring_hook
 from skt_lib.io import read_table
 from skt_lib.schemas import CONTACTS, SUPPORTS, TRIALS
 from tests.cli.conftest import run_skt, tree_state
-from tools.example_hooks import coat_hook, ring_hook
 
 MUG = os.path.join(pybullet_data.getDataPath(), "objects", "mug.obj")
 ROUND_TRIP = "support_00001"  # tiny preset: a normal test support (an L-hook) with an SKT

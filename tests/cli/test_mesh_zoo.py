@@ -1,4 +1,4 @@
-"""The mesh zoo (:mod:`tools.mesh_zoo`) through ``skt import-support`` / ``import-object``,
+"""The mesh zoo (:mod:`skt_lib.cli.mesh_zoo`) through ``skt import-support`` / ``import-object``,
 each case in a process of its own: no case ends the process abnormally (exit codes 0 or 2
 only), the "import" cases import (the known misses named, with their reason), every
 "refuse" case gets one ``ERROR:`` line and leaves its data root as it was, dense meshes are
@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
+from skt_lib.cli.mesh_zoo import DENSE_FACES, cases, linked_root, run_case
 from skt_lib.geometry.simplify import MAX_FACES
 from tests.cli.conftest import tree_state
-from tools.mesh_zoo import DENSE_FACES, cases, linked_root, run_case
 
 #: "import" cases that do not import today, with what their error says: the pigtail's 330°
 #: curl defeats the threading planner (4 of 4 SKT attempts ``no_path``).

@@ -9,9 +9,9 @@ import pytest
 import yaml
 
 from skt_lib.errors import DataError
-from skt_lib.eval.report import _seeds_section
 from skt_lib.eval.seeds import inputs_key, runs_document, seed_block
 from viz.report import Report
+from viz.sim_eval_report import _seeds_section
 
 LEVELS = ["easy"] * 4 + ["very_hard"] * 4
 BASE = 7
@@ -21,7 +21,7 @@ def _repo(tmp_path):
     repo = tmp_path / "repo"
     for path, text in {"params.yaml": "common: {seed: 7}\n",
                        "skt_lib/sim/execute.py": "A = 1\n", "stages/sim_eval.py": "run()\n",
-                       "viz/report.py": "pretty()\n", "skt_lib/eval/report.py": "table()\n",
+                       "viz/report.py": "pretty()\n", "skt_lib/eval/metrics.py": "table()\n",
                        "skt_lib/eval/methods.py": "sctdn()\n", "skt_lib/eval/seeds.py": "merge()\n",
                        "data/views/v.npz": "cloud"}.items():
         (repo / path).parent.mkdir(parents=True, exist_ok=True)
@@ -46,7 +46,7 @@ def test_the_key_follows_data_code_and_params_but_not_models_reports_or_its_own_
     key = inputs_key(repo)
     _lock(repo, views="v1", train_outs="m2", train_deps="c1", sim_eval="e2")
     (repo / "viz/report.py").write_text("prettier()\n")
-    (repo / "skt_lib/eval/report.py").write_text("wider_table()\n")  # in a directory dep
+    (repo / "skt_lib/eval/metrics.py").write_text("wider_table()\n")  # in a directory dep
     (repo / "skt_lib/eval/seeds.py").write_text("merge_better()\n")
     (repo / "data/views/v.npz").write_text("another cloud")  # read through the lock only
     assert inputs_key(repo) == key  # the base seed's models, sim_eval's stale entry, reports

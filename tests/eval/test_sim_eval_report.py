@@ -7,9 +7,9 @@ import pytest
 from skt_lib.config import LEVELS
 from skt_lib.eval.orderings import check_orderings
 from skt_lib.eval.protocol import success_table
-from skt_lib.eval.stats import paired_comparisons, success_ci95, support_ci95
 from skt_lib.sim.execute import REASONS
-from skt_lib.eval.report import write_report
+from skt_lib.stats import paired_comparisons, success_ci95, support_ci95
+from viz.sim_eval_report import write_report
 
 METHODS = ["oracle_floating", "template_only", "sctdn", "kpam"]
 

@@ -4,10 +4,10 @@ snapped to the shape's principal axis when that lies within 10° and admits the 
 import numpy as np
 import trimesh
 
+from skt_lib.cli.mesh_zoo import scissors
 from skt_lib.geometry.aperture import find_aperture
 from skt_lib.geometry.convex import Mesh
 from skt_lib.geometry.repair import repair
-from tools.mesh_zoo import scissors
 
 
 def _aperture(tm: trimesh.Trimesh):

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import trimesh
 
+from skt_lib.cli.mesh_zoo import knob_peg, two_bodies
 from skt_lib.errors import MeshError
 from skt_lib.geometry.checks import check_parts
 from skt_lib.geometry.convex import Mesh
 from skt_lib.geometry.decompose import ROUTES, Route, decompose
 from skt_lib.isolated import ChildFailed, call_isolated
-from tools.mesh_zoo import knob_peg, two_bodies
 
 FAULTS = "tests.geometry.faults"
 

@@ -1,4 +1,4 @@
-"""The SKT contract (DESIGN §3): rotation-minimizing frames anchored at the hang, against
+"""The SKT contract (docs/design.md §3): rotation-minimizing frames anchored at the hang, against
 frames worked out by hand (columns x, y, z; g = −z), the per-step reference, closed forms
 (a helix's holonomy) and the rule where they must equal it; resampling by travel and turning;
 the executed path."""

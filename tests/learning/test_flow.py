@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import torch
 
+from skt_lib.coverage import coverage, multimodality_coverage
 from skt_lib.errors import DataError
-from skt_lib.eval.coverage import coverage, multimodality_coverage
 from skt_lib.eval.methods import make_method
 from skt_lib.geometry.objects import REFERENCE_RING_RADIUS_M
 from skt_lib.learning.cloud_check import ring_penetrations, ring_placements

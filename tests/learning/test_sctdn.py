@@ -234,8 +234,8 @@ def test_contact_rate_counts_only_views_where_the_contact_is_seen():
 
 
 def test_validation_intervals_wilson_for_rates_bootstrap_over_supports_for_errors():
-    from skt_lib.eval.stats import wilson_interval
     from skt_lib.learning.train import intervals
+    from skt_lib.stats import wilson_interval
 
     per = {"traj_mm": np.array([1.0, 3.0, 10.0, 12.0]), "template_mm": np.full(4, 5.0),
            "aff_mse": np.zeros(4), "cls_ok": np.array([1.0, 0.0, 1.0, 1.0]),

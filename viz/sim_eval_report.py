@@ -12,11 +12,11 @@ from pathlib import Path
 import pandas as pd
 
 from skt_lib.config import LEVELS, OBJECT_CATEGORIES
-from skt_lib.eval.coverage import COVER_M
+from skt_lib.coverage import COVER_M
 from skt_lib.eval.methods import PROPOSING
 from skt_lib.eval.orderings import success_given
-from skt_lib.eval.stats import wilson_interval
 from skt_lib.sim.execute import REASONS
+from skt_lib.stats import wilson_interval
 from viz.figures import bar_chart
 from viz.report import Report
 
@@ -74,7 +74,7 @@ def write_report(rep: Path, trials: pd.DataFrame, pairs: pd.DataFrame, metrics: 
         "A trial: the Panda holds the object at its grasp (fixed keypoint→hand transform), "
         "follows the SKT from ξ_T-1 to ξ_0 (all of it, ≤ 2 mm per command, joint position "
         "control), releases, retreats; gravity is tilted ±y, +x and settled; the strict "
-        "predicate (DESIGN §5) decides. Each method sees one seeded view of each support. "
+        "predicate (docs/design.md §5) decides. Each method sees one seeded view of each support. "
         + (f"Test supports without a ground-truth SKT, left out: {', '.join(missing)}."
            if missing else ""))
     report.heading("Table I: success rate (%) [Wilson 95 %] ‖ support-bootstrap 95 %")
@@ -261,7 +261,7 @@ def _seeds_section(report: Report, seeds: dict | None) -> None:
 
 def _coverage_table(report: Report, cov: dict | None) -> None:
     """Multimodality: the share of a test support's ground-truth SKTs a method's samples
-    reach (:mod:`skt_lib.eval.coverage`), per level."""
+    reach (:mod:`skt_lib.coverage`), per level."""
     if not cov:
         return
     report.heading("Multimodality: ground-truth SKTs reached (%)")

@@ -2,7 +2,7 @@
 a coat hook with two prongs at different heights and an open ring on a stem. The README's
 walk-through and the import tests use them.
 
-    .venv/bin/python -m tools.example_hooks [FOLDER]   # writes coat_hook.stl, ring_hook.stl
+    .venv/bin/python -m skt_lib.cli.example_hooks [FOLDER]   # writes coat_hook.stl, ring_hook.stl
 """
 
 import sys

@@ -4,7 +4,7 @@ cluster bootstrap over supports."""
 import numpy as np
 import pytest
 
-from skt_lib.eval.stats import (
+from skt_lib.stats import (
     A_BETTER, B_BETTER, NO_DIFFERENCE, bootstrap_mean_interval, mcnemar_exact_p,
     paired_comparison, paired_comparisons, paired_support_interval, success_ci95, support_ci95,
     wilson_interval,

@@ -8,7 +8,7 @@ Every mesh is built here, from the project's own primitives (:mod:`skt_lib.geome
 and trimesh, so the tests write the zoo themselves. Each :class:`Case` says what a correct
 importer does with it: ``"import"`` or ``"refuse"`` (one ``ERROR:`` line, exit code 2).
 
-    .venv/bin/python -m tools.mesh_zoo FOLDER     # writes every case's mesh, lists them
+    .venv/bin/python -m skt_lib.cli.mesh_zoo FOLDER     # writes every case's mesh, lists them
 """
 
 import math
@@ -23,11 +23,11 @@ import numpy as np
 import pybullet_data
 import trimesh
 
+from skt_lib.cli.example_hooks import coat_hook, ring_hook
 from skt_lib.config.params_file import load_params
 from skt_lib.geometry.convex import Mesh, box, sphere, tube, union
 from skt_lib.geometry.objects import sample_object
 from skt_lib.geometry.supports import PLATE_THICKNESS_M, _Path
-from tools.example_hooks import coat_hook, ring_hook
 
 WALL = (PLATE_THICKNESS_M, 0.0, 0.0)
 #: Faces the densest resolution of a family reaches at least.
@@ -211,7 +211,7 @@ def moved(mesh: trimesh.Trimesh, offset) -> trimesh.Trimesh:
 
 def generated_object(category: str, seed: int) -> trimesh.Trimesh:
     """An object the generator makes (its convex parts' union), object frame."""
-    p = load_params(Path(__file__).resolve().parents[1] / "params.yaml").mesh_gen
+    p = load_params(Path(__file__).resolve().parents[2] / "params.yaml").mesh_gen
     shape = sample_object(np.random.default_rng(seed), category, p)
     return _tm(union(list(shape.parts)))
 
