@@ -68,7 +68,7 @@ def main(argv=None) -> int:
         for s in r["skts"]:
             pos_quat = [matrix_pose(t) for t in s["poses"]]
             xi0_err.append(float(np.linalg.norm(s["keypoints"][0] - k_goal)))
-            if xi0_err[-1] > REACH_TOL_M:  # not an SKT of this support (DESIGN §3)
+            if xi0_err[-1] > REACH_TOL_M:  # not an SKT of this support (docs/design.md §3)
                 continue
             reached[supports.loc[r["support_id"], "difficulty"]] += 1
             rows.append({"support_id": r["support_id"], "skt_index": s["index"],

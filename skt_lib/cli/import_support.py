@@ -1,7 +1,7 @@
 """``skt import-support MESH``: bring your own hook, peg or rack.
 
 The mesh (any format trimesh reads) is scaled to metres (``--units``), repaired or refused
-(:mod:`skt_lib.geometry.repair`) and put in the support frame (DESIGN §3: origin at the
+(:mod:`skt_lib.geometry.repair`) and put in the support frame (docs/design.md §3: origin at the
 mount point on the wall, +x out of the wall, +z up): as it is, or by ``--mount`` and
 ``--out-axis`` (the mesh's +z stays up as far as the out-axis allows). A mesh that reaches
 behind the wall is refused; one that does not touch the wall gets a wall plate

@@ -6,7 +6,7 @@ from skt_lib.config import PositiveLength, Section
 
 
 class PerturbationParams(Section):
-    accel_m_s2: float = Field(ge=0.0, le=9.81, description="Sideways/outward gravity tilt (DESIGN §5).")
+    accel_m_s2: float = Field(ge=0.0, le=9.81, description="Sideways/outward gravity tilt (docs/design.md §5).")
     steps_per_direction: int = Field(ge=1, le=100000, description="Steps per tilt direction.")
     settle_steps: int = Field(ge=1, le=100000, description="Steps under normal gravity after tilting.")
     rest_speed_m_s: float = Field(

@@ -2,7 +2,7 @@
 ``mesh_gen`` draws (:mod:`skt_lib.geometry.supports`), so that an imported hook gets a hang
 region and a difficulty level by the same rules as a generated one.
 
-The mesh (support frame, DESIGN §3) is filled on a voxel grid (ray-parity occupancy); each
+The mesh (support frame, docs/design.md §3) is filled on a voxel grid (ray-parity occupancy); each
 filled voxel's distance to the nearest empty one approximates the local section radius. An
 *arm* is a shortest path through the filled voxels from the wall plate (x ≤
 :data:`PLATE_THICKNESS_M`) to a tip, each step weighted by the inverse square of that

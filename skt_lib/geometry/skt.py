@@ -1,4 +1,4 @@
-"""The SKT contract (DESIGN §3): keypoint trajectories, their frames, resampling and the
+"""The SKT contract (docs/design.md §3): keypoint trajectories, their frames, resampling and the
 path as executed. Planning, simulation, learning and the command line all use this module
 and nothing else for it.
 

@@ -1,6 +1,6 @@
 """Procedural supporting items (hooks, pegs, racks) in the support frame.
 
-Support frame (DESIGN §3): origin at the mounting point on the wall surface, +x out of the
+Support frame (docs/design.md §3): origin at the mounting point on the wall surface, +x out of the
 wall toward the robot, +z up, +y = z × x. Every item is a wall plate (``x ∈ [0, 1 cm]``)
 plus *strokes* — tubes of round or square section along polylines — and optional knobs.
 Stroke 0 is the hanging arm. Hooks lie in the x–z plane; racks add strokes along y.

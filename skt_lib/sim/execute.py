@@ -1,5 +1,5 @@
 """One hanging trial: a hand carries an object along an SKT, releases it, and the strict
-predicate of :mod:`skt_lib.sim.hanging` judges the result (DESIGN §5).
+predicate of :mod:`skt_lib.sim.hanging` judges the result (docs/design.md §5).
 
 The object is held rigidly at its grasp: the grasp target sits at ``ξ_i · T_kpt_ee`` while
 the object's keypoint sits at ``ξ_i`` (paper §IV, fixed keypoint→end-effector transform).
@@ -274,7 +274,7 @@ def run_trial(task: TrialTask) -> dict:
         fallen = None if reference else _Fallen(world, obj, support)
         for i, (gravity, steps) in enumerate(phases):
             settle = i == len(phases) - 1
-            if settle:  # the settle may damp (DESIGN §5); the perturbation does not
+            if settle:  # the settle may damp (docs/design.md §5); the perturbation does not
                 pb.changeDynamics(obj, -1, linearDamping=s.settle_linear_damping,
                                   angularDamping=s.settle_angular_damping, physicsClientId=world.cid)
             world.set_gravity_support(gravity)

@@ -1,4 +1,4 @@
-"""The hanging perturbation and the strict success predicate (DESIGN §5).
+"""The hanging perturbation and the strict success predicate (docs/design.md §5).
 
 After an object is released: perturb — gravity tilted ±``accel`` along the wall (support
 ±y) and ``accel`` outward from the wall (support +x), on top of −9.81 z, for
