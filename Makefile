@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 UV_VERSION := $(shell sed -n 's/^uv==//p' requirements.lock)
 
-.PHONY: env lock repro paper test bench review seeds val-sim camera mutation train-diagnostics clean-env
+.PHONY: env lock repro paper test browser-tools bench review seeds val-sim camera mutation train-diagnostics clean-env
 
 env: $(STAMP)
 
@@ -56,8 +56,20 @@ repro: $(STAMP)
 	@# Table I and the other run figures of README.md and docs/ from the new reports
 	$(BIN)/python -m tools.docs_results
 
-test: $(STAMP)
+test: $(STAMP) browser-tools
 	$(BIN)/python -m pytest -q
+
+browser-tools:
+	@# the Rerun web-viewer tests (tests/test_review.py) screenshot recordings in headless
+	@# Chromium and read their labels with tesseract: Debian's packages, installed as root
+	@if [ ! -x /usr/bin/chromium ] || ! command -v tesseract >/dev/null; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "installing Debian packages chromium and tesseract-ocr (for the viewer tests)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium tesseract-ocr >/dev/null; \
+	  else \
+	    echo "the viewer tests will skip: run 'sudo apt-get install chromium tesseract-ocr'" >&2; \
+	  fi; \
+	fi
 
 SEEDS ?= 3
 paper: $(STAMP)
