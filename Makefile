@@ -1,6 +1,9 @@
 # Two entry points: `make repro` (the whole pipeline on params.yaml) and `make test`.
 # Both create .venv first if it is missing or older than pyproject.toml / requirements.lock.
 SHELL := /bin/bash
+# One OpenBLAS kernel on every x86-64 CPU, so runs agree across machines (skt_lib/__init__.py
+# sets it too; here it also covers tools that load numpy before skt_lib)
+export OPENBLAS_CORETYPE ?= Haswell
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin

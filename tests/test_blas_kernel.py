@@ -1,0 +1,46 @@
+"""One OpenBLAS kernel on every x86-64 CPU (``skt_lib.BLAS_CORETYPE``): a stage process
+computes with it whatever kernel the CPU would pick, so machines agree (an AMD EPYC and an
+Intel Xeon made other contacts in ``contact_sim`` from the same seed before)."""
+
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import skt_lib
+
+ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"),
+                                reason="OpenBLAS core types pinned on x86-64 only")
+CORENAME = """
+import ctypes, glob, os, numpy
+lib = glob.glob(os.path.join(os.path.dirname(numpy.__file__), "..", "numpy.libs",
+                             "libscipy_openblas64*.so"))[0]
+get = ctypes.CDLL(lib).scipy_openblas_get_corename64_
+get.restype = ctypes.c_char_p
+print(get().decode())
+"""
+
+
+def _run(code: str, **env) -> subprocess.CompletedProcess:
+    clean = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    return subprocess.run([sys.executable, "-W", "always", "-c", code], cwd=ROOT,
+                          env=clean | env, capture_output=True, text=True, check=True)
+
+
+def test_a_stage_process_computes_with_the_pinned_kernel():
+    assert _run("import stages" + CORENAME).stdout.strip() == skt_lib.BLAS_CORETYPE
+
+
+def test_the_environment_overrides_the_pin():
+    out = _run("import stages" + CORENAME, OPENBLAS_CORETYPE="Sandybridge")
+    assert out.stdout.strip() == "Sandybridge"
+
+
+def test_numpy_loaded_first_is_warned_about():
+    out = _run("import numpy\nimport skt_lib")
+    assert "numpy was imported before skt_lib" in out.stderr
+    assert "numpy was imported before skt_lib" not in _run("import skt_lib\nimport numpy").stderr
