@@ -36,6 +36,7 @@ from pathlib import Path
 import psutil
 import yaml
 
+from skt_lib.io import write_json_atomic
 from tools.scaling import POLL_S, TreeMonitor
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -124,15 +125,8 @@ def append_segment(ws: Path, segment: dict) -> list[dict]:
     path = ws / "logs" / "paper-segments.json"
     segments = json.loads(path.read_text()) if path.exists() else []
     segments.append(segment)
-    write_json(path, segments)
+    write_json_atomic(path, segments)
     return segments
-
-
-def write_json(path: Path, value) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(value, indent=1))
-    tmp.replace(path)
 
 
 def run_segment(ws: Path, commit: str, cmd: list[str], kind: str, log: Path) -> int:
@@ -160,7 +154,7 @@ def run_segment(ws: Path, commit: str, cmd: list[str], kind: str, log: Path) -> 
             seen = len(mon.stages)
             mon.poll(root, now)
             if now - saved >= SAVE_S or len(mon.stages) > seen:  # a stage begins: saved at once
-                write_json(partial, segment | {"wall_s": now, "stages": mon.result()})
+                write_json_atomic(partial, segment | {"wall_s": now, "stages": mon.result()})
                 saved = now
             time.sleep(POLL_S)
     append_segment(ws, segment | {"wall_s": time.monotonic() - t0, "exit_code": proc.returncode,
