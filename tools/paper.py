@@ -193,28 +193,42 @@ def up_to_date(ws: Path) -> bool:
     return out.returncode == 0
 
 
-def stage_totals(segments: list[dict], commit: str) -> dict[str, dict]:
-    """Each stage's wall and CPU seconds summed over the pipeline segments of ``commit`` (a
-    stage killed and resumed counts both parts) and its largest peak memory."""
-    out: dict[str, dict] = {}
+def stage_totals(segments: list[dict]) -> dict[str, dict]:
+    """Each stage's wall and CPU seconds for its last completed run: summed over the pipeline
+    segments from the one after its previous completion to the one it completed in (a stage
+    killed and resumed counts both parts, at whichever commits they ran: the workspace keeps
+    a stage's outputs while its code is unchanged), and its largest peak memory. A stage
+    completed in a segment that saw a later stage begin, or that exited 0. A stage killed and
+    then rerun from scratch because its code changed counts the killed part too."""
+    done: dict[str, dict] = {}
+    acc: dict[str, dict] = {}
     for seg in segments:
-        if seg["commit"] != commit or seg["kind"] != "pipeline":
+        if seg["kind"] != "pipeline":
             continue
-        for name, s in seg["stages"].items():
-            t = out.setdefault(name, {"wall_s": 0.0, "cpu_s": 0.0, "peak_rss_mb": 0.0,
-                                      "segments": 0})
+        order = list(seg["stages"])
+        for i, name in enumerate(order):
+            s = seg["stages"][name]
+            t = acc.setdefault(name, {"wall_s": 0.0, "cpu_s": 0.0, "peak_rss_mb": 0.0,
+                                      "segments": 0, "commits": []})
             t["wall_s"] += s["wall_s"]
             t["cpu_s"] += s["cpu_s"]
             t["peak_rss_mb"] = max(t["peak_rss_mb"], s["peak_rss_mb"])
             t["segments"] += 1
-    return {name: out[name] for name in STAGES if name in out}
+            if seg["commit"] not in t["commits"]:
+                t["commits"].append(seg["commit"])
+            if i < len(order) - 1 or seg["exit_code"] == 0:
+                done[name] = acc.pop(name)
+    return {name: done[name] for name in STAGES if name in done}
 
 
 def collect(ws: Path, dest: Path, commit: str) -> dict:
     """The workspace's reports, params, lock and run figures into ``dest`` (replaced whole)."""
     segments = json.loads((ws / "logs" / "paper-segments.json").read_text())
-    totals = stage_totals(segments, commit)
-    seeds = [s for s in segments if s["commit"] == commit and s["kind"] == "seeds"]
+    totals = stage_totals(segments)
+    # the seed step's segments since the pipeline last ran a stage (that reran make them stale)
+    last = max((i for i, s in enumerate(segments) if s["kind"] == "pipeline" and s["stages"]),
+               default=-1)
+    seeds = [s for s in segments[last + 1:] if s["kind"] == "seeds"]
     run = {
         "commit": commit,
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
@@ -222,8 +236,7 @@ def collect(ws: Path, dest: Path, commit: str) -> dict:
         "stages": totals,
         "pipeline_wall_s": sum(t["wall_s"] for t in totals.values()),
         "seeds_wall_s": sum(s["wall_s"] for s in seeds) if seeds else None,
-        "segments": [{k: v for k, v in s.items() if k != "stages"} for s in segments
-                     if s["commit"] == commit],
+        "segments": [{k: v for k, v in s.items() if k != "stages"} for s in segments],
     }
     tmp = dest.with_name(dest.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
@@ -240,22 +253,27 @@ def collect(ws: Path, dest: Path, commit: str) -> dict:
 def summary(run: dict) -> str:
     lines = [
         "# The paper preset's run (`make paper`)", "",
-        f"Commit `{run['commit'][:7]}`, {run['machine']}; the parameters are "
+        f"Collected at commit `{run['commit'][:7]}`, {run['machine']}; a stage's outputs "
+        "come from the commits in its row (the workspace keeps a stage's outputs while its "
+        "code and parameters are unchanged: DVC decides). The parameters are "
         "[`params.yaml`](params.yaml) (the committed default with `params.paper.yaml` "
         "applied) and the outputs' hashes [`dvc.lock`](dvc.lock). Each stage's report is in "
         "its folder here.", "",
-        "| stage | wall (min) | CPU (min) | peak RSS (MB) | segments |", "|---|---|---|---|---|",
+        "| stage | wall (min) | CPU (min) | peak RSS (MB) | segments | commits |",
+        "|---|---|---|---|---|---|",
     ]
     for name, t in run["stages"].items():
         lines.append(f"| [`{name}`]({name}/report.md) | {t['wall_s'] / 60:.1f} | "
-                     f"{t['cpu_s'] / 60:.1f} | {t['peak_rss_mb']:.0f} | {t['segments']} |")
-    lines.append(f"| **pipeline** | **{run['pipeline_wall_s'] / 60:.1f}** | | | |")
+                     f"{t['cpu_s'] / 60:.1f} | {t['peak_rss_mb']:.0f} | {t['segments']} | "
+                     + ", ".join(f"`{c[:7]}`" for c in t["commits"]) + " |")
+    lines.append(f"| **pipeline** | **{run['pipeline_wall_s'] / 60:.1f}** | | | | |")
     if run["seeds_wall_s"] is not None:
         lines.append(f"| extra training seeds (`tools.seed_sweep`, then `sim_eval`) | "
-                     f"{run['seeds_wall_s'] / 60:.1f} | | | |")
+                     f"{run['seeds_wall_s'] / 60:.1f} | | | | |")
     lines += ["", "Wall time is the stage's process tree from its first to its last sighting "
               "(polled every 0.5 s), summed over the segments (a killed and resumed stage has "
-              "two); set-up (the environment) is not included.", ""]
+              "two); set-up (the environment) is not included. Wall time also counts whatever "
+              "else the machine ran meanwhile; CPU time does not.", ""]
     return "\n".join(lines)
 
 

@@ -134,15 +134,21 @@ def test_overrides_name_unknown_keys_and_parse_values():
         set_overrides(["compute.backend"])
 
 
-def test_stage_totals_sum_segments_of_the_commit_only():
-    seg = {"kind": "pipeline", "commit": "c1", "stages": {
-        "rrt_skts": {"wall_s": 10.0, "cpu_s": 15.0, "peak_rss_mb": 100.0}}}
-    other = {**seg, "commit": "c0"}
-    seeds = {**seg, "kind": "seeds"}
-    second = {"kind": "pipeline", "commit": "c1", "stages": {
-        "rrt_skts": {"wall_s": 5.0, "cpu_s": 9.0, "peak_rss_mb": 300.0},
-        "mesh_gen": {"wall_s": 1.0, "cpu_s": 1.0, "peak_rss_mb": 50.0}}}
-    totals = stage_totals([other, seg, seeds, second], "c1")
-    assert list(totals) == ["mesh_gen", "rrt_skts"]  # pipeline order
-    assert totals["rrt_skts"] == {"wall_s": 15.0, "cpu_s": 24.0, "peak_rss_mb": 300.0,
-                                  "segments": 2}
+def test_stage_totals_count_a_stages_last_completed_run_across_commits():
+    def seg(commit, exit_code, **stages):
+        return {"kind": "pipeline", "commit": commit, "exit_code": exit_code, "stages": {
+            name: {"wall_s": w, "cpu_s": 2 * w, "peak_rss_mb": 10 * w}
+            for name, w in stages.items()}}
+    segments = [
+        seg("c0", 0, rrt_skts=100.0),                    # an earlier complete run: superseded
+        seg("c0", None, mesh_gen=1.0, rrt_skts=7.0),      # mesh_gen done, rrt_skts killed
+        {**seg("c1", 0, train=50.0), "kind": "seeds"},   # not pipeline time
+        seg("c1", 0, rrt_skts=5.0, train=3.0),            # resumed on a later commit
+    ]
+    totals = stage_totals(segments)
+    assert list(totals) == ["mesh_gen", "rrt_skts", "train"]  # pipeline order
+    assert totals["rrt_skts"] == {"wall_s": 12.0, "cpu_s": 24.0, "peak_rss_mb": 70.0,
+                                  "segments": 2, "commits": ["c0", "c1"]}
+    assert totals["mesh_gen"]["commits"] == ["c0"] and totals["train"]["segments"] == 1
+    # a stage still running when its segment was killed has no completed run yet
+    assert "train" not in stage_totals(segments[:2] + [seg("c1", None, train=3.0)])
