@@ -16,6 +16,9 @@ of the embedded default) with a wide margin; the figures are in the comments:
   whose up or out-of-wall axis is turned (z forward, as a camera's optical axis) puts the
   plate's half behind it.
 
+Each warning says what to do: ``--camera`` for a raw camera cloud with the wall in view (the
+frame is found from the wall), ``--frame`` for a cloud whose camera pose is known.
+
 Not caught: a cloud turned about x alone (upside down, or z and y swapped) keeps the wall
 plane where it is; nothing in a partial view of an arbitrary hook says reliably which way
 is up. The confidence figures in the JSON (the classifier's probability, the affordance
@@ -31,6 +34,10 @@ MIN_OFF_WALL_SHARE = 0.01
 FAR_M = 0.25
 BEHIND_M = 0.005
 BEHIND_SHARE = 0.05
+#: what each warning advises
+ADVICE = ("a raw depth-camera cloud with the wall in view? pass --camera (with --up X Y Z or "
+          "--level) to find the support frame from the wall; a cloud whose camera pose you "
+          "know: pass --frame T.json")
 
 
 def check_support_cloud(points: np.ndarray, name: str = "points") -> list[str]:
@@ -43,16 +50,16 @@ def check_support_cloud(points: np.ndarray, name: str = "points") -> list[str]:
     if dist > FAR_M:
         warnings.append(
             f"{name}: its centroid is {dist:.2f} m from the support frame's origin (training "
-            f"clouds: within 0.07 m) — is it still in the camera frame? pass --frame")
+            f"clouds: within 0.07 m) — is it still in the camera frame? " + ADVICE)
     behind = float(np.mean(pts[:, 0] < -BEHIND_M))
     if behind > BEHIND_SHARE:
         warnings.append(
             f"{name}: {100 * behind:.0f} % of its points lie behind the wall plane x = 0 — "
-            "its axes may not be the support frame's (x out of the wall, z up)")
+            "its axes may not be the support frame's (x out of the wall, z up): " + ADVICE)
     off = float(np.mean(pts[:, 0] > OFF_WALL_M))
     if off < MIN_OFF_WALL_SHARE and dist <= FAR_M:
         raise InputError(
             f"{name}: no structure stands off the wall ({100 * off:.1f} % of points more than "
             f"{100 * OFF_WALL_M:.0f} cm in front of x = 0; a hook's view has ≥ 2.5 %) — "
-            "is there a hook in this cloud, and is it in the support frame?")
+            "is there a hook in this cloud, and is it in the support frame? " + ADVICE)
     return warnings

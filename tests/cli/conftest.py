@@ -15,6 +15,7 @@ from skt_lib.perception.views import RENDER_SPEC
 
 STAGES = ("mesh_gen", "contact_sim", "rotation_extraction", "rrt_skts", "render_views",
           "affordance_maps", "clustering", "train", "train_baselines")
+ROOT = Path(__file__).resolve().parents[2]
 EASY_SUPPORT, OBJECT = "support_00008", "object_mug_000"  # tiny preset: an easy test support
 
 
@@ -60,3 +61,22 @@ def save_ply(path: Path, points: np.ndarray) -> Path:
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
     assert o3d.io.write_point_cloud(str(path), pcd)
     return path
+
+
+def camera_cloud(data_root: Path, view: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """A depth camera's raw cloud (camera frame, the wall in view, the sensor model at its
+    default severity) of the easy test support, with the true camera-to-support pose."""
+    from skt_lib.config.params_file import load_params
+    from skt_lib.geometry.export import read_obj
+    from skt_lib.io import read_table
+    from skt_lib.perception.sensor import CameraScene, Intrinsics, SensorModel, camera_view
+    from skt_lib.perception.views import support_cameras
+    from skt_lib.schemas import SUPPORTS
+
+    p = load_params(ROOT / "params.yaml").render_views
+    rows = read_table(data_root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")
+    (mesh,) = read_obj(data_root / "mesh_gen" / rows.loc[EASY_SUPPORT, "mesh_path"])
+    pose = support_cameras(mesh, p)[view].pose()
+    seen = camera_view(CameraScene(mesh), pose, Intrinsics(p.width, p.height, p.fov_deg),
+                       SensorModel(), np.random.default_rng(0))
+    return seen.points, pose

@@ -9,7 +9,7 @@ from skt_lib.cli.predict import prepare_cloud
 from skt_lib.geometry.se3 import pose_matrix, quat_to_matrix
 from skt_lib.learning.predictor import SktPredictor
 from skt_lib.geometry.skt import skt_frames
-from tests.cli.conftest import EASY_SUPPORT, run_skt, save_ply
+from tests.cli.conftest import camera_cloud, run_skt, save_ply
 
 
 def _predict(capsys, data_root, cloud, out, *extra):
@@ -138,32 +138,13 @@ def test_training_views_pass_the_cloud_checks(tiny_dataset):
     assert len(views) >= 42 and all(check_support_cloud(v) == [] for v in views)
 
 
-def _camera_cloud(data_root, view: int = 10):
-    """A depth camera's raw cloud (camera frame, the wall in view, the sensor model at its
-    default severity) of the easy test support, with the true camera-to-support pose."""
-    from skt_lib.config.params_file import load_params
-    from skt_lib.geometry.export import read_obj
-    from skt_lib.io import read_table
-    from skt_lib.perception.sensor import CameraScene, Intrinsics, SensorModel, camera_view
-    from skt_lib.perception.views import support_cameras
-    from skt_lib.schemas import SUPPORTS
-
-    p = load_params("params.yaml").render_views
-    rows = read_table(data_root / "mesh_gen" / "supports.parquet", SUPPORTS).set_index("support_id")
-    (mesh,) = read_obj(data_root / "mesh_gen" / rows.loc[EASY_SUPPORT, "mesh_path"])
-    pose = support_cameras(mesh, p)[view].pose()
-    seen = camera_view(CameraScene(mesh), pose, Intrinsics(p.width, p.height, p.fov_deg),
-                       SensorModel(), np.random.default_rng(0))
-    return seen.points, pose
-
-
 def test_camera_mode_finds_the_frame_and_writes_the_skt_in_both_frames(capsys, data_root,
                                                                         tmp_path):
     from scipy.spatial.transform import Rotation
 
     from skt_lib.geometry.se3 import invert
 
-    points, pose = _camera_cloud(data_root)
+    points, pose = camera_cloud(data_root)
     np.save(tmp_path / "raw.npy", points)
     up = pose[:3, :3].T @ [0.0, 0.0, 1.0]  # against gravity, in the camera frame
     got = _predict(capsys, data_root, tmp_path / "raw.npy", tmp_path / "up.json", "--camera",
@@ -199,7 +180,10 @@ def test_camera_mode_finds_the_frame_and_writes_the_skt_in_both_frames(capsys, d
     assert t_m <= 0.001 and r_deg <= 0.5
     t_m, r_deg = error(got["camera"]["camera_to_support"], mm["camera"]["camera_to_support"])
     assert t_m <= 1e-4 and r_deg <= 0.01
-    # without --camera the same file is taken to be in the support frame: no camera block
+    # without --camera the same file is taken to be in the support frame: no camera block,
+    # and a warning that says what to do
     np.save(tmp_path / "plain.npy", points)
-    assert "camera" not in _predict(capsys, data_root, tmp_path / "plain.npy",
-                                    tmp_path / "plain.json")
+    plain = _predict(capsys, data_root, tmp_path / "plain.npy", tmp_path / "plain.json")
+    assert "camera" not in plain
+    assert plain["warnings"] and all("pass --camera" in w and "--frame" in w
+                                     for w in plain["warnings"]), plain["warnings"]
