@@ -23,14 +23,21 @@ def _plate(z_lo: float, z_hi: float) -> trimesh.Trimesh:
 
 
 def coat_hook() -> trimesh.Trimesh:
-    """A plate with a long lower prong rising 12° to a ball end and a short upper prong at 40°."""
-    lower = trimesh.creation.cylinder(0.005, segment=[(0.005, 0, 0.0), (0.075, 0, 0.015)],
-                                      sections=32)
+    """A plate with a long lower prong and a short upper prong at 40°. The lower prong runs
+    out 6 cm sloping down 8°, then turns up 53° to a ball end, as a coat hook's does: what
+    hangs on it settles in the bend, 5 cm from the wall, so a mug's body hangs clear of the
+    wall. (A prong rising straight from the plate slides everything back against the plate,
+    where a mug 8 cm across meets the wall on its way in.)"""
+    bend, tip = (0.06, 0, -0.008), (0.075, 0, 0.012)
+    lower = trimesh.creation.cylinder(0.005, segment=[(0.005, 0, 0.0), bend], sections=32)
+    turn = trimesh.creation.cylinder(0.005, segment=[bend, tip], sections=32)
+    elbow = trimesh.creation.icosphere(3, 0.005)
+    elbow.apply_translation(bend)
     ball = trimesh.creation.icosphere(3, 0.008)
-    ball.apply_translation((0.075, 0, 0.015))
+    ball.apply_translation(tip)
     upper = trimesh.creation.cylinder(0.004, segment=[(0.005, 0, 0.05), (0.045, 0, 0.084)],
                                       sections=32)
-    return _union([_plate(-0.02, 0.07), lower, ball, upper])
+    return _union([_plate(-0.02, 0.07), lower, turn, elbow, ball, upper])
 
 
 def _tube(points: np.ndarray, radius: float) -> list[trimesh.Trimesh]:
