@@ -218,3 +218,40 @@ def test_each_trial_plots_its_own_distance_series(tmp_path):
         if entity.startswith("/plots"):
             plots.setdefault(entity, set()).update(t for name, t in times if name == "trial")
     assert plots == {"/plots/keypoint_to_skt_mm/00": {0}, "/plots/keypoint_to_skt_mm/01": {1}}
+
+
+def test_the_arm_is_hidden_in_a_trials_final_state_only(tmp_path):
+    """A Panda trial shows its arm at every recorded step but the last, the final state the
+    ``trial`` timeline shows (the arm hid the hang); a floating-hand trial never shows it."""
+    from types import SimpleNamespace
+
+    import numpy as np
+    import trimesh
+
+    from viz.rollouts import log_rollouts, robot_meshes
+
+    links = list(robot_meshes((0.15, 0.0, 0.3)))
+    box = trimesh.creation.box((0.01, 0.01, 0.01))
+    replay = []
+    for n, panda in enumerate((True, False)):
+        task = SimpleNamespace(trial_id=f"t{n}", method="oracle", support_id="s", object_id="o",
+                               alternatives=(), positions=((0, 0, 0), (0.1, 0, 0)),
+                               keypoint=tuple(np.eye(4).ravel()))
+        row = {"success": n == 1, "failure_reason": "" if n else "dropped", "difficulty": "easy",
+               "category": "mug", "grasp": "g", "max_track_err_m": 0.0, "detail": ""}
+        frames = [{"step": 4 * i, "object": np.eye(4),
+                   "links": {k: np.eye(4) for k in links} if panda else None} for i in range(5)]
+        replay.append((task, {"row": row, "trace": frames}))
+    log_rollouts(tmp_path / "r.rrd", replay, {"s": box}, {"o": box}, (0.15, 0.0, 0.3))
+    import ast
+
+    scales = sorted((dict(times)["trial"], dict(times)["step"],
+                     ast.literal_eval(dict(vals)["Transform3D:scale"])[0][0])
+                    for (entity, times, vals), _ in _rows(tmp_path / "r.rrd").items()
+                    if entity == "/world/robot")
+    # the failure (Panda) is replayed first: shown from its start, hidden (micrometre-sized:
+    # the viewer ignores a zero scale) at its last step 16; the floating-hand trial starts
+    # after it and the gap, hidden throughout
+    assert [(t, s, scale == 1.0 or scale < 1e-5) for t, s, scale in scales] == \
+        [(0, 0, True), (0, 16, True), (1, 66, True)], scales
+    assert [scale == 1.0 for *_, scale in scales] == [True, False, False], scales

@@ -5,6 +5,8 @@ trial, to replay each rollout).
 
     world/robot/link_<k>              Panda visual meshes (static), posed every recorded step;
                                       scaled to nothing during floating-hand trials (no arm)
+                                      and at a trial's last step (its final state, what the
+                                      ``trial`` timeline shows: the arm hid the hang)
     world/trials/<n>/support          the support of trial n
     world/trials/<n>/object           the object, posed every recorded step
     world/trials/<n>/skt              the SKT executed (keypoint path, the method's colour)
@@ -45,6 +47,9 @@ _SUPPORT_RGBA = (0.55, 0.4, 0.25, 1.0)
 _OBJECT_RGBA = (0.2, 0.6, 0.9, 1.0)
 _GAP = 50  # empty steps between rollouts
 _TRAIL_RGB, _TRAIL_RADIUS = (250, 250, 250), 0.0008  # the keypoint trail's look
+#: the arm's scale where it is hidden: the viewer ignores a zero scale (a singular transform),
+#: drawing the arm at full size, so a micrometre-sized arm it is
+_HIDDEN = 1e-6
 
 #: Colours of the Table I baselines (the pipeline methods' are viz.rerun_log.METHOD_RGB).
 BASELINE_RGB = {"sctdn_cp_feature": (240, 120, 160), "vatmart": (150, 90, 200),
@@ -133,7 +138,7 @@ def log_rollouts(path: Path, replay: list, support_meshes: dict, object_meshes: 
                        level=row["difficulty"], category=row["category"], grasp=row["grasp"] or "-",
                        max_track_err_mm=1000 * row["max_track_err_m"], detail=row["detail"] or "-")
             panda = bool(frames) and frames[0]["links"] is not None  # None: the floating hand
-            rec.log("world/robot", rr.Transform3D(scale=1.0 if panda else 0.0))
+            rec.log("world/robot", rr.Transform3D(scale=1.0 if panda else _HIDDEN))
             sm, om = support_meshes[task.support_id], object_meshes[task.object_id]
             log_mesh(rec, f"{name}/support", sm.vertices, sm.faces, _SUPPORT_RGBA)
             log_mesh(rec, f"{name}/object", om.vertices, om.faces, _OBJECT_RGBA, pose=np.eye(4))
@@ -145,4 +150,7 @@ def log_rollouts(path: Path, replay: list, support_meshes: dict, object_meshes: 
             if frames:
                 _log_trace(rec, name, n, step, frames, links if panda else None,
                            np.asarray(task.keypoint, dtype=np.float64).reshape(4, 4), skt)
+                if panda:  # the trial's final state without the arm, which hid the hang
+                    rec.set_time("step", sequence=step + frames[-1]["step"])
+                    rec.log("world/robot", rr.Transform3D(scale=_HIDDEN))
             step += (frames[-1]["step"] if frames else 0) + _GAP
