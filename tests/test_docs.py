@@ -285,3 +285,32 @@ def test_missing_marker_or_report_is_one_error(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("ERROR: reports/sim_eval/metrics.json: not found")
     with pytest.raises(docs_results.DocsError, match="README.md: needs exactly one"):
         docs_results.write_block("no markers\n", "results", "x", "README.md")
+
+
+def test_paper_table_one_has_the_published_and_default_rows_beside_it():
+    """The README's Table I from the paper run: each row's own levels and interval, the
+    SKT-Hang paper's published All where it has the method, the default's All, and the
+    training seeds' All once merged."""
+    def entry(all_, single=None):
+        e = {"success": {"all": all_, "easy": 0.9, "normal": 0.8, "hard": 0.7, "very_hard": 0.5},
+             "success_support_ci95": {"all": [all_ - 0.1, all_ + 0.1]}}
+        if single is not None:
+            e.update(n_proposals=10, success_single={"all": single, "easy": 0.5, "normal": 0.5,
+                                                     "hard": 0.5, "very_hard": 0.25})
+        return e
+    paper = {"n_test_supports": 60, "n_test_objects": 10, "sctdn": entry(0.6),
+             "vatmart_mod": entry(0.8, 0.55), "skt_flow": entry(0.7, 0.65)}
+    default = {"sctdn": entry(0.535), "vatmart_mod": entry(0.855, 0.62)}
+    table = docs_results.paper_table_one(paper, default)
+    assert "60 test supports × 10 test objects" in table and "| seeds |" not in table
+    assert "| `sctdn` | 60.0 [50.0–70.0] | 90.0 | 80.0 | 70.0 | 50.0 | 83.7 | 53.5 |" in table
+    assert "| `vatmart_mod` (best of 10) | 80.0 [70.0–90.0] | 90.0 | 80.0 | 70.0 | 50.0 | 72.1 | 85.5 |" in table
+    assert "| `vatmart_mod`, one SKT | 55.0 | 50.0 | 50.0 | 50.0 | 25.0 | – | 62.0 |" in table
+    assert "| `skt_flow` (best of 10) | 70.0 [60.0–80.0] | 90.0 | 80.0 | 70.0 | 50.0 | – | – |" in table
+    paper["seeds"] = {"status": "ok", "seeds": [0, 1, 2], "sctdn": {
+        "success_mean": {"all": 0.6}, "success_min": {"all": 0.55}, "success_max": {"all": 0.7}}}
+    table = docs_results.paper_table_one(paper, default)
+    assert "| SKT-Hang | default | seeds |" in table
+    assert "| `sctdn` | 60.0 [50.0–70.0] | 90.0 | 80.0 | 70.0 | 50.0 | 83.7 | 53.5 | 60.0 [55.0–70.0] |" in table
+    paper["seeds"] = {"status": "stale", "reason": "made from other inputs"}
+    assert "not merged yet (made from other inputs)" in docs_results.paper_table_one(paper, default)

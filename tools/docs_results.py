@@ -17,11 +17,13 @@ from pathlib import Path
 
 from skt_lib.config.sim_eval import METHODS
 from tools import scaling
+from viz.sim_eval_report import PAPER as PAPER_ROWS
 
 ROOT = Path(__file__).resolve().parents[1]
 METRICS = Path("reports/sim_eval/metrics.json")
 BENCH = Path("reports/bench/bench.json")
 SCALING = Path("reports/bench/scaling.json")  # optional: written by `python -m tools.scaling`
+PAPER_METRICS = Path("reports/paper/sim_eval/metrics.json")  # optional: `make paper`'s
 
 LEVELS = (("all", "All"), ("easy", "Easy"), ("normal", "Normal"), ("hard", "Hard"),
           ("very_hard", "Very Hard"))
@@ -107,8 +109,9 @@ def load_reports(root: Path = ROOT) -> dict:
             out[key] = json.loads(path.read_text())
         except json.JSONDecodeError as err:
             raise DocsError(f"{rel}: not valid JSON: {err}") from None
-    path = root / SCALING
-    out["scaling"] = json.loads(path.read_text()) if path.is_file() else {}
+    for key, rel in (("scaling", SCALING), ("paper", PAPER_METRICS)):
+        path = root / rel
+        out[key] = json.loads(path.read_text()) if path.is_file() else {}
     return out
 
 
@@ -162,6 +165,57 @@ def table_one(metrics: dict) -> str:
                     f"{_pct(b['success_max'][k])}]" for k, _ in LEVELS) + " |")
     elif seeds:
         lines += ["", f"Over training seeds: not merged ({seeds['reason']})."]
+    return "\n".join(lines)
+
+
+def _seed_cell(metrics: dict, method: str) -> str:
+    b = (metrics.get("seeds") or {}).get(method)
+    if not isinstance(b, dict) or "success_mean" not in b or b["success_mean"]["all"] is None:
+        return "–"
+    return (f"{_pct(b['success_mean']['all'])} [{_pct(b['success_min']['all'])}–"
+            f"{_pct(b['success_max']['all'])}]")
+
+
+def paper_table_one(paper: dict, default: dict) -> str:
+    """Table I of the paper preset's run (``make paper``), with the SKT-Hang paper's published
+    All and the embedded default's All beside each row, and the learned methods over
+    training seeds when the seed step merged."""
+    seeds = paper.get("seeds") or {}
+    merged = seeds.get("status") == "ok"
+    lines = [f"Success rate (%) at the paper's scale (`make paper`, "
+             f"[reports/paper](reports/paper/README.md)): {paper['n_test_supports']} test "
+             f"supports × {paper['n_test_objects']} test objects, one trial per pair and method; "
+             "brackets: the 95 % interval from a bootstrap over test supports (the support is "
+             "the unit of evidence). *SKT-Hang*: the paper's published All; *default*: the "
+             "embedded default's All (20 test supports, `make repro`)"
+             + (f"; *seeds*: All over training seeds {', '.join(map(str, seeds['seeds']))}, "
+                "mean [min–max]." if merged else "."), "",
+             "| method | " + " | ".join(title for _, title in LEVELS) + " | SKT-Hang | default"
+             + (" | seeds |" if merged else " |"),
+             "|---" * (len(LEVELS) + 3 + merged) + "|"]
+
+    def row(label: str, m: str, key: str) -> str:
+        e = paper[m]
+        success, ci = e[key], e.get(f"{key}_support_ci95") or {}
+        cells = [_pct(success.get(k)) for k, _ in LEVELS]
+        if ci.get("all") and success.get("all") is not None:
+            cells[0] += f" [{_pct(ci['all'][0])}–{_pct(ci['all'][1])}]"
+        published = PAPER_ROWS.get(m) if key == "success" else None
+        cells.append("–" if published is None else f"{published[1][0]:.1f}")
+        d = (default.get(m) or {}).get(key) or {}
+        cells.append(_pct(d.get("all")))
+        if merged:
+            cells.append(_seed_cell(paper, m) if key == "success" else "–")
+        return f"| {label} | " + " | ".join(cells) + " |"
+
+    for m in table_methods(paper):
+        e = paper[m]
+        best_of = f" (best of {e['n_proposals']})" if "success_single" in e else ""
+        lines.append(row(f"`{m}`{best_of}", m, "success"))
+        if "success_single" in e:
+            lines.append(row(f"`{m}`, one SKT", m, "success_single"))
+    if seeds and not merged:
+        lines += ["", f"Over training seeds: not merged yet ({seeds['reason']})."]
     return "\n".join(lines)
 
 
@@ -235,14 +289,17 @@ def paper_preset(bench: dict) -> str:
 
 def blocks(reports: dict) -> dict[str, dict[str, str]]:
     """File (relative to the repo root) -> block name -> the block's generated text."""
-    metrics, bench = reports["metrics"], reports["bench"]
+    metrics, bench, paper = reports["metrics"], reports["bench"], reports.get("paper") or {}
+    data = reports.get("scaling", {})
     return {
-        "README.md": {"results": table_one(metrics),
-                      "presets": scaling.presets_summary(reports.get("scaling", {}))},
-        "docs/presets.md": {"sim-size": sim_size(metrics), "bench": bench_table(bench),
+        "README.md": {"results": paper_table_one(paper, metrics) if paper else table_one(metrics),
+                      "presets": scaling.presets_summary(data)},
+        "docs/presets.md": {"default-results": table_one(metrics),
+                            "sim-size": sim_size(metrics), "bench": bench_table(bench),
                             "paper-preset": paper_preset(bench),
-                            "fresh-repro": scaling.fresh_summary(reports.get("scaling", {})),
-                            "scaling": scaling.table(reports.get("scaling", {}))},
+                            "paper-run": scaling.paper_table(data),
+                            "fresh-repro": scaling.fresh_summary(data),
+                            "scaling": scaling.table(data)},
     }
 
 

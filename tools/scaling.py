@@ -4,6 +4,7 @@ time, CPU time and peak memory into ``reports/bench/scaling.json`` and ``scaling
     .venv/bin/python -m tools.scaling --supports 240 60 120 --work /tmp/skt-scaling
     .venv/bin/python -m tools.scaling --fresh          # git clone + make repro, set-up included
     .venv/bin/python -m tools.scaling --plot-only      # redraw scaling.png from the JSON
+    .venv/bin/python -m tools.scaling --paper-run reports/paper/run.json   # the measured 472
 
 Each count runs in its own clone of the committed HEAD (this checkout's ``.venv`` linked
 in) with ``mesh_gen.n_supports`` set and every other parameter as committed: the same
@@ -14,6 +15,10 @@ last sighting; ``peak_rss_mb`` is the largest sum of their resident set sizes se
 time sums each process's user + system time at its last sighting (a poll's worth may be
 missed at the end of each process). Each count is written to the JSON as soon as it
 finishes; counts already there are skipped (``--redo`` runs them again).
+
+``--paper-run reports/paper/run.json`` records the measured paper preset (``make paper``'s
+own per-stage figures, :mod:`tools.paper`) as ``paper_run``; ``--forget N …`` drops counts
+measured on code that has since changed.
 
 ``--fresh`` measures what the README promises instead: a plain ``git clone`` of HEAD and
 ``make repro`` in it, the environment created from nothing (no ``.venv`` linked, pip's
@@ -243,14 +248,55 @@ def skts_planned(params: dict) -> int:
             + r.get("n_skts_per_test_support", r["n_skts_per_support"]) * n_test)
 
 
+def paper_run(run_json: Path) -> dict:
+    """The paper preset as ``make paper`` measured it (``reports/paper/run.json`` and the
+    ``params.yaml`` beside it): per stage wall and CPU seconds and peak RSS, the pipeline's
+    wall time (its stages' sum: set-up and the seed step not included)."""
+    run = json.loads(run_json.read_text())
+    params = yaml.safe_load((run_json.parent / "params.yaml").read_text())
+    return {"commit": run["commit"][:7], "machine": run["machine"],
+            "n_supports": total_supports(params), "skts_planned": skts_planned(params),
+            "wall_s": run["pipeline_wall_s"], "seeds_wall_s": run.get("seeds_wall_s"),
+            "stages": {k: {f: v[f] for f in ("wall_s", "cpu_s", "peak_rss_mb")}
+                       for k, v in run["stages"].items()}}
+
+
+def paper_table(data: dict) -> str:
+    """Markdown: each stage of the measured paper run beside the fresh default's."""
+    p, f = data.get("paper_run"), data.get("fresh_repro") or {}
+    if not p:
+        return "Not measured yet: run `make paper`, then `python -m tools.scaling --paper-run`."
+    fs = f.get("stages", {})
+    lines = [f"`make paper` at commit {p['commit']} ({p['machine']}; "
+             f"[`reports/paper/run.json`](../reports/paper/run.json)) beside the fresh default "
+             f"(`make repro` at {f.get('commit', '–')}). Minutes; CPU time is the stage's "
+             "processes' user + system time (2 cores: at most twice the wall time, less where "
+             "other work shared the machine).", "",
+             "| stage | default wall | paper wall | paper CPU | paper peak RSS (MB) |",
+             "|---|---|---|---|---|"]
+    for name, st in p["stages"].items():
+        d = fs.get(name, {}).get("wall_s")
+        lines.append(f"| `{name}` | {'–' if d is None else f'{d / 60:.1f}'} | "
+                     f"{st['wall_s'] / 60:.1f} | {st['cpu_s'] / 60:.1f} | "
+                     f"{st['peak_rss_mb']:.0f} |")
+    default = sum(v["wall_s"] for v in fs.values()) if fs else None
+    lines.append(f"| **pipeline** | {'–' if default is None else f'**{default / 60:.1f}**'} | "
+                 f"**{p['wall_s'] / 60:.1f}** | "
+                 f"{sum(v['cpu_s'] for v in p['stages'].values()) / 60:.1f} | |")
+    if p.get("seeds_wall_s"):
+        lines += ["", f"The seed step (two more training seeds, then `sim_eval`): "
+                      f"{p['seeds_wall_s'] / 60:.1f} min."]
+    return "\n".join(lines)
+
+
 def presets_summary(data: dict) -> str:
     """Markdown for the README: the whole pipeline's measured time per count, and the paper
     preset's, labelled an extrapolation."""
     runs = sorted(data.get("runs", []), key=lambda r: r["n_supports"])
-    if not runs:
+    if not runs and not data.get("fresh_repro") and not data.get("paper_run"):
         return "Not measured yet: run `.venv/bin/python -m tools.scaling`."
-    paper = extrapolate(data)
-    k = data["skts_per_support"]
+    paper = extrapolate(data) if runs else {}
+    k = data.get("skts_per_support")
     default = yaml.safe_load((ROOT / "params.yaml").read_text())["mesh_gen"]["n_supports"]
     lines = ["| preset | supports | SKTs planned | whole pipeline, 2-core CPU machine |",
              "|---|---|---|---|"]
@@ -262,7 +308,13 @@ def presets_summary(data: dict) -> str:
         lines.append(f"| embedded default, fresh clone + `make repro` (set-up included) | "
                      f"{f.get('n_supports', default)} | {f.get('skts_planned', planned):,} | "
                      f"{f['wall_s'] / 60:.1f} min (measured at {f['commit']}) |")
-    if paper:
+    if p := data.get("paper_run"):
+        slowest = max(p["stages"], key=lambda k: p["stages"][k]["wall_s"])
+        lines.append(f"| paper (`make paper`, one training seed) | {p['n_supports']} | "
+                     f"{p['skts_planned']:,} | {p['wall_s'] / 3600:.1f} h (measured at "
+                     f"{p['commit']}; `{slowest}` {p['stages'][slowest]['wall_s'] / 60:.0f} min "
+                     "of it) |")
+    elif paper:
         slowest = max(paper, key=paper.get)
         lines.append(f"| paper | {PAPER['n_supports']} | "
                      f"{PAPER['n_supports'] * PAPER['skts_per_support']:,} | ≈ "
@@ -277,6 +329,9 @@ def plot(data: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     runs = sorted(data["runs"], key=lambda r: r["n_supports"])
+    if not runs:
+        _plot_presets(data, path, plt)
+        return
     stages = [s for s in data["stages"] if all(s in r["stages"] for r in runs)]
     fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(11, 4.5))
     ns = [r["n_supports"] for r in runs]
@@ -307,6 +362,10 @@ def main(argv=None) -> int:
     ap.add_argument("--plot-only", action="store_true")
     ap.add_argument("--fresh", action="store_true",
                     help="only git clone + make repro at the committed params (module docs)")
+    ap.add_argument("--paper-run", type=Path, metavar="RUN_JSON",
+                    help="only record make paper's measured run (reports/paper/run.json)")
+    ap.add_argument("--forget", type=int, nargs="+", default=[], metavar="N",
+                    help="drop these support counts' runs (measured on code since changed)")
     args = ap.parse_args(argv)
     path = args.out / "scaling.json"
     stages = list(yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"])
@@ -316,6 +375,17 @@ def main(argv=None) -> int:
                 n_test_supports=len(LEVELS) * params["mesh_gen"]["n_test_per_level"],
                 machine=f"{psutil.cpu_count()} cores, {params['compute']['n_workers']} workers, "
                 f"{psutil.virtual_memory().total / 2**30:.0f} GiB")
+    if args.forget:
+        data["runs"] = [r for r in data["runs"] if r["n_supports"] not in args.forget]
+        if not data["runs"]:
+            data.pop("peak_rss_mb", None)
+    if args.paper_run or args.forget:
+        if args.paper_run:
+            data["paper_run"] = paper_run(args.paper_run)
+        path.write_text(json.dumps(data, indent=2) + "\n")
+        plot(data, args.out / "scaling.png")
+        print(paper_table(data))
+        return 0
     if args.fresh:
         args.work.mkdir(parents=True, exist_ok=True)
         data["fresh_repro"] = fresh_repro(args.work)
@@ -355,3 +425,33 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def _plot_presets(data: dict, path: Path, plt) -> None:
+    """Per stage, the fresh default's and the paper run's wall time and peak RSS, side by
+    side (two presets, not a size sweep: the paper plans 50 SKTs per support, the default 4)."""
+    runs = [(f"default, {data['fresh_repro'].get('n_supports', '?')} supports (fresh make repro)",
+             data["fresh_repro"]["stages"])] if data.get("fresh_repro") else []
+    if p := data.get("paper_run"):
+        runs.append((f"paper, {p['n_supports']} supports (make paper)", p["stages"]))
+    if not runs:
+        return
+    stages = [s for s in data.get("stages", []) if any(s in st for _, st in runs)]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    y = np.arange(len(stages))
+    h = 0.8 / len(runs)
+    for ax, key, what, scale in ((axes[0], "wall_s", "wall time (min)", 60.0),
+                                 (axes[1], "peak_rss_mb", "peak RSS, stage + workers (MB)", 1.0)):
+        for i, (label, st) in enumerate(runs):
+            ax.barh(y + i * h, [st.get(s, {}).get(key, 0.0) / scale for s in stages], h,
+                    label=label)
+        ax.set_yticks(y + h * (len(runs) - 1) / 2, stages)
+        ax.invert_yaxis()
+        ax.set_xlabel(what)
+        ax.grid(True, axis="x", alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"What each stage costs, default and paper preset ({data.get('machine', '')})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+

@@ -111,10 +111,12 @@ def test_the_pybullet_mug_on_an_imported_hook(capsys, tmp_path, data_root, tiny_
 
 
 def test_mount_and_out_axis_put_the_mesh_in_the_support_frame(capsys, tmp_path, data_root,
-                                                             tiny_dataset):
+                                                             planner_params):
     """The coat hook authored in millimetres, sticking out along −y from a mount at
-    (20, 30, 40) mm: imported, it is the coat hook in the support frame."""
-    params = tiny_dataset[0]
+    (20, 30, 40) mm: imported, it is the coat hook in the support frame, measured and hung
+    as the hook modelled there (the committed planner: the tiny one threads the lower
+    prong's bend on one of the two and falls back to the upper prong on the other)."""
+    params = planner_params
     hook = coat_hook()
     rot = trimesh.transformations.rotation_matrix(-np.pi / 2, (0, 0, 1))  # +x → −y
     hook.apply_transform(rot)
@@ -128,7 +130,12 @@ def test_mount_and_out_axis_put_the_mesh_in_the_support_frame(capsys, tmp_path, 
     (visual,) = [trimesh.load(data_root / "user" / "supports" / "coat_mm" / "visual.obj",
                               force="mesh", process=False)]
     assert np.allclose(visual.bounds, coat_hook().bounds, atol=1e-6)
-    assert rec["difficulty"] == "easy" and rec["n_arms"] == 2
+    # measured as the same hook modelled in the support frame, in metres
+    plain = tmp_path / "coat_plain.stl"
+    coat_hook().export(plain)
+    ref, _ = _import(capsys, plain, "coat_plain", params, data_root)
+    assert (rec["difficulty"], rec["n_arms"]) == (ref["difficulty"], 2)
+    assert np.allclose(rec["hang_point"], ref["hang_point"], atol=1e-3)
     assert rec["hang_point"][2] < 0.02  # the lower prong is the hanging arm
 
 

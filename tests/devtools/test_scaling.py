@@ -128,3 +128,46 @@ def test_skts_planned_counts_test_supports_at_their_own_rate():
     assert scaling.total_supports(params) == 150
     del params["rrt_skts"]["n_skts_per_test_support"]  # params from before the split count
     assert scaling.skts_planned(params) == 150 * 4
+
+
+def test_paper_run_is_recorded_measured_and_stale_counts_forgotten(tmp_path):
+    """``--paper-run``: make paper's own figures become the paper row (measured, not
+    extrapolated) and the per-stage table beside the fresh default; ``--forget`` drops
+    counts; the plot then compares the two presets."""
+    paper = tmp_path / "paper"
+    paper.mkdir()
+    params = yaml.safe_load((scaling.ROOT / "params.yaml").read_text())
+    params["mesh_gen"].update(n_supports=472, n_extra_train_supports=0, n_test_per_level=15)
+    params["rrt_skts"].update(n_skts_per_support=50, n_skts_per_test_support=50)
+    (paper / "params.yaml").write_text(yaml.safe_dump(params))
+    stages = {"rrt_skts": {"wall_s": 3600.0, "cpu_s": 7000.0, "peak_rss_mb": 1600.0,
+                           "segments": 2, "commits": ["a"]},
+              "sim_eval": {"wall_s": 1800.0, "cpu_s": 3500.0, "peak_rss_mb": 2500.0,
+                           "segments": 1, "commits": ["a"]}}
+    (paper / "run.json").write_text(json.dumps({
+        "commit": "abcdef1234", "machine": "x86_64, 2 cores, 24 GiB", "stages": stages,
+        "pipeline_wall_s": 5400.0, "seeds_wall_s": 900.0, "segments": []}))
+    runs = [{"n_supports": n, "commit": "old", "wall_s": 10.0 * n, "stages": {
+        "rrt_skts": {"wall_s": n, "cpu_s": n, "peak_rss_mb": 900.0}}} for n in (60, 120)]
+    (tmp_path / "scaling.json").write_text(json.dumps({
+        "runs": runs, "fresh_repro": {"commit": "def", "wall_s": 1700.0, "setup_s": 60.0,
+                                      "git_status_clean": True, "n_supports": 200,
+                                      "skts_planned": 880, "stages": {
+                                          "rrt_skts": {"wall_s": 480.0, "cpu_s": 900.0,
+                                                       "peak_rss_mb": 900.0}}}}))
+    assert scaling.main(["--paper-run", str(paper / "run.json"), "--forget", "60", "120",
+                         "--out", str(tmp_path)]) == 0
+    data = json.loads((tmp_path / "scaling.json").read_text())
+    assert data["runs"] == [] and "peak_rss_mb" not in data
+    p = data["paper_run"]
+    assert (p["commit"], p["n_supports"], p["wall_s"]) == ("abcdef1", 472, 5400.0)
+    assert p["skts_planned"] == 472 * 50 and p["stages"]["rrt_skts"]["cpu_s"] == 7000.0
+    summary = scaling.presets_summary(data)
+    assert ("| paper (`make paper`, one training seed) | 472 | 23,600 | 1.5 h (measured at "
+            "abcdef1; `rrt_skts` 60 min of it) |") in summary
+    assert "extrapolated" not in summary and "resized" not in summary
+    table = scaling.paper_table(data)
+    assert "| `rrt_skts` | 8.0 | 60.0 | 116.7 | 1600 |" in table
+    assert "| `sim_eval` | – | 30.0 | 58.3 | 2500 |" in table
+    assert "seed step" in table and "15.0 min" in table
+    assert (tmp_path / "scaling.png").stat().st_size > 10_000
