@@ -24,7 +24,7 @@ What is returned: the camera-to-support transform and the structure's points, wa
 in the support frame — what the predictor's training views show.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import open3d as o3d
@@ -56,6 +56,7 @@ class WallSettings:
     mount_above_m: float = 0.025  # the mount's height over the footprint's lower edge
     min_structure_points: int = 100
     seed: int = 0  # RANSAC's seed
+    noise_k: float = 4.0  # the wall's band is at least this many σ of its depth noise
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,6 +150,7 @@ def support_frame(points: np.ndarray, up: np.ndarray | None = None,
     z = _up_in_wall(n, up, s)
     rot = np.stack([n, np.cross(z, n), z])  # rows: the support axes in the camera frame
     height = a @ n + d  # signed distance in front of the wall
+    s = _for_noise(s, wall_noise(height))
     off = a[(height > s.off_wall_m) & (height < s.max_reach_m)]
     structure = _structure(off, off @ n + d, s)
     if structure is None:
@@ -160,6 +162,25 @@ def support_frame(points: np.ndarray, up: np.ndarray | None = None,
     t[:3, :3] = rot
     t[:3, 3] = -rot @ origin
     return WallFrame(t, structure @ rot.T + t[:3, 3], int(wall.sum()), len(a))
+
+
+def wall_noise(height: np.ndarray) -> float:
+    """The depth noise across the wall (σ, m), from the points behind the fitted plane:
+    nothing stands behind a wall, so they are the noise's near half alone (a half-normal's
+    median is 0.6745 σ); the structure in front does not bias it."""
+    behind = -height[(height < 0) & (height > -0.05)]
+    return float(np.median(behind) / 0.6745) if len(behind) >= 50 else 0.0
+
+
+def _for_noise(s: WallSettings, sigma: float) -> WallSettings:
+    """``s`` with the wall's band widened to ``noise_k`` σ where that exceeds ``off_wall_m``
+    (a noisy wall's far points would stand off it as a sheet and pass for the hook), the
+    touch and footprint bands moved out with it."""
+    grow = max(0.0, s.noise_k * sigma - s.off_wall_m)
+    if grow == 0.0:
+        return s
+    return replace(s, off_wall_m=s.off_wall_m + grow, touch_m=s.touch_m + grow,
+                   footprint_m=s.footprint_m + grow)
 
 
 def _mount(local: np.ndarray, wall_x: float, s: WallSettings) -> np.ndarray:
