@@ -255,3 +255,35 @@ def test_the_arm_is_hidden_in_a_trials_final_state_only(tmp_path):
     assert [(t, s, scale == 1.0 or scale < 1e-5) for t, s, scale in scales] == \
         [(0, 0, True), (0, 16, True), (1, 66, True)], scales
     assert [scale == 1.0 for *_, scale in scales] == [True, False, False], scales
+
+
+def test_rrt_skts_recording_draws_at_most_eight_skts_per_support(tmp_path):
+    """The paper preset's 50 SKTs per support would overflow Rerun's reader; the first 8 are
+    drawn and the item says so; a support with fewer is drawn whole, its label unchanged."""
+    import numpy as np
+    import pandas as pd
+    import trimesh
+
+    from viz.recording_query import item_labels
+    from viz.rrt_skts_report import MAX_DRAWN_SKTS, log_skts
+
+    box = trimesh.creation.box((0.05, 0.05, 0.1))
+    rng = np.random.default_rng(0)
+    counts = {"support_00000": 12, "support_00001": 3}
+    results = [{"support_id": sid, "n_attempted": n, "failures": {}, "skts": [
+        {"index": k, "keypoints": np.cumsum(rng.normal(0, 0.005, (20, 3)), 0),
+         "min_clearance_m": 0.001, "poses": [np.eye(4), np.eye(4)]} for k in range(n)]}
+        for sid, n in counts.items()]
+    supports = pd.DataFrame({"difficulty": ["easy", "hard"], "family": ["j", "l"]},
+                            index=list(counts))
+    log_skts(tmp_path / "r.rrd", results, supports, {s: box for s in counts}, box)
+    drawn = {}
+    for (entity, _, _), _ in _rows(tmp_path / "r.rrd").items():
+        parts = entity.split("/")
+        if "skt" in parts and parts[-1] != "waypoints":
+            sid = next(p for p in parts if p.startswith("support_"))
+            drawn.setdefault(sid, set()).add(int(parts[parts.index("skt") + 1]))
+    assert MAX_DRAWN_SKTS == 8
+    assert drawn == {"support_00000": set(range(8)), "support_00001": {0, 1, 2}}
+    labels = item_labels(tmp_path / "r.rrd", "support")
+    assert "the first 8" in labels[0] and "drawn" not in labels[1]

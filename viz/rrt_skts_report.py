@@ -26,9 +26,17 @@ from viz.rerun_log import (
 )
 
 
+#: SKTs drawn per support in the recording (the first ones; the report's figures use all):
+#: Rerun cannot read back a recording of the paper preset's 470 × 50 SKTs, two entities each
+#: (its index overflows the reader's flatbuffer limit, ``TooManyTables``), and 50 overlaid
+#: paths on one hook are no clearer than 8
+MAX_DRAWN_SKTS = 8
+
+
 def log_skts(path: Path, results: list[dict], supports, meshes: dict, ref_mesh) -> None:
     """The recording: ``results`` of :func:`~skt_lib.planning.skts.plan_support_skts`,
-    ``supports`` the supports table indexed by id, ``meshes`` {support_id: mesh}."""
+    ``supports`` the supports table indexed by id, ``meshes`` {support_id: mesh}; at most
+    :data:`MAX_DRAWN_SKTS` SKTs drawn per support."""
     level = supports["difficulty"]
     bp = item_blueprint("rrt_skts: ground-truth SKTs (reference object at ξ_0 and at the start)",
                         "support", SKT_EYE, SKT_LOOK_AT,
@@ -42,10 +50,12 @@ def log_skts(path: Path, results: list[dict], supports, meshes: dict, ref_mesh) 
                        skts=f"{len(r['skts'])} of {r['n_attempted']} attempted",
                        min_clearance_mm=(1000 * min(k["min_clearance_m"] for k in r["skts"])
                                          if r["skts"] else "-"),
-                       failures=", ".join(f"{k} {v}" for k, v in sorted(r["failures"].items())) or "none")
+                       failures=", ".join(f"{k} {v}" for k, v in sorted(r["failures"].items())) or "none",
+                       **({"drawn": f"the first {MAX_DRAWN_SKTS}"}
+                          if len(r["skts"]) > MAX_DRAWN_SKTS else {}))
             items.scalar("skts_planned", len(r["skts"]))
             log_mesh(rec, e, m.vertices, m.faces, SUPPORT_RGBA)
-            for s in r["skts"]:
+            for s in r["skts"][:MAX_DRAWN_SKTS]:
                 log_strip(rec, f"{e}/skt/{s['index']}", s["keypoints"], radius=0.001)
                 log_frames(rec, f"{e}/skt/{s['index']}/waypoints",
                            skt_frames(resample(s["keypoints"], 10)), 0.01)
