@@ -353,6 +353,35 @@ def plot(data: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def _plot_presets(data: dict, path: Path, plt) -> None:
+    """Per stage, the fresh default's and the paper run's wall time and peak RSS, side by
+    side (two presets, not a size sweep: the paper plans 50 SKTs per support, the default 4)."""
+    runs = [(f"default, {data['fresh_repro'].get('n_supports', '?')} supports (fresh make repro)",
+             data["fresh_repro"]["stages"])] if data.get("fresh_repro") else []
+    if p := data.get("paper_run"):
+        runs.append((f"paper, {p['n_supports']} supports (make paper)", p["stages"]))
+    if not runs:
+        return
+    stages = [s for s in data.get("stages", []) if any(s in st for _, st in runs)]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    y = np.arange(len(stages))
+    h = 0.8 / len(runs)
+    for ax, key, what, scale in ((axes[0], "wall_s", "wall time (min)", 60.0),
+                                 (axes[1], "peak_rss_mb", "peak RSS, stage + workers (MB)", 1.0)):
+        for i, (label, st) in enumerate(runs):
+            ax.barh(y + i * h, [st.get(s, {}).get(key, 0.0) / scale for s in stages], h,
+                    label=label)
+        ax.set_yticks(y + h * (len(runs) - 1) / 2, stages)
+        ax.invert_yaxis()
+        ax.set_xlabel(what)
+        ax.grid(True, axis="x", alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"What each stage costs, default and paper preset ({data.get('machine', '')})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--supports", type=int, nargs="+", default=[240, 60, 120])
@@ -425,33 +454,4 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
-
-
-def _plot_presets(data: dict, path: Path, plt) -> None:
-    """Per stage, the fresh default's and the paper run's wall time and peak RSS, side by
-    side (two presets, not a size sweep: the paper plans 50 SKTs per support, the default 4)."""
-    runs = [(f"default, {data['fresh_repro'].get('n_supports', '?')} supports (fresh make repro)",
-             data["fresh_repro"]["stages"])] if data.get("fresh_repro") else []
-    if p := data.get("paper_run"):
-        runs.append((f"paper, {p['n_supports']} supports (make paper)", p["stages"]))
-    if not runs:
-        return
-    stages = [s for s in data.get("stages", []) if any(s in st for _, st in runs)]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
-    y = np.arange(len(stages))
-    h = 0.8 / len(runs)
-    for ax, key, what, scale in ((axes[0], "wall_s", "wall time (min)", 60.0),
-                                 (axes[1], "peak_rss_mb", "peak RSS, stage + workers (MB)", 1.0)):
-        for i, (label, st) in enumerate(runs):
-            ax.barh(y + i * h, [st.get(s, {}).get(key, 0.0) / scale for s in stages], h,
-                    label=label)
-        ax.set_yticks(y + h * (len(runs) - 1) / 2, stages)
-        ax.invert_yaxis()
-        ax.set_xlabel(what)
-        ax.grid(True, axis="x", alpha=0.3)
-    axes[0].legend(fontsize=7)
-    fig.suptitle(f"What each stage costs, default and paper preset ({data.get('machine', '')})")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
