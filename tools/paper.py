@@ -198,14 +198,18 @@ def stage_totals(segments: list[dict]) -> dict[str, dict]:
     segments from the one after its previous completion to the one it completed in (a stage
     killed and resumed counts both parts, at whichever commits they ran: the workspace keeps
     a stage's outputs while its code is unchanged), and its largest peak memory. A stage
-    completed in a segment that saw a later stage begin, or that exited 0. A stage killed and
+    completed in a segment that saw a later stage begin (stages in the order first seen; in a
+    segment recorded without it, in pipeline order), or that exited 0. A stage killed and
     then rerun from scratch because its code changed counts the killed part too."""
     done: dict[str, dict] = {}
     acc: dict[str, dict] = {}
     for seg in segments:
         if seg["kind"] != "pipeline":
             continue
-        order = list(seg["stages"])
+        # the order the stages ran in: first seen (a segment recorded without it: the
+        # pipeline's order; saved segments' keys are sorted)
+        order = sorted(seg["stages"], key=lambda k: (seg["stages"][k].get("first_s", 0.0),
+                                                     STAGES.index(k) if k in STAGES else 99))
         for i, name in enumerate(order):
             s = seg["stages"][name]
             t = acc.setdefault(name, {"wall_s": 0.0, "cpu_s": 0.0, "peak_rss_mb": 0.0,

@@ -91,9 +91,12 @@ class TreeMonitor:
         return min((s["first"] for s in self.stages.values()), default=float("nan"))
 
     def result(self) -> dict[str, dict]:
+        """Per stage: wall, CPU and peak RSS, and ``first_s``, when it was first seen
+        (seconds after the monitored command started: the order stages ran in, which a JSON
+        file written with sorted keys does not keep)."""
         return {name: {"wall_s": s["last"] - s["first"] + POLL_S,
                        "cpu_s": float(sum(self._cpu[name].values())),
-                       "peak_rss_mb": s["peak_rss"] / 2**20}
+                       "peak_rss_mb": s["peak_rss"] / 2**20, "first_s": s["first"]}
                 for name, s in self.stages.items()}
 
 

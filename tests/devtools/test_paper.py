@@ -152,3 +152,9 @@ def test_stage_totals_count_a_stages_last_completed_run_across_commits():
     assert totals["mesh_gen"]["commits"] == ["c0"] and totals["train"]["segments"] == 1
     # a stage still running when its segment was killed has no completed run yet
     assert "train" not in stage_totals(segments[:2] + [seg("c1", None, train=3.0)])
+    # saved segments' keys are sorted: the order they ran in is their first sighting (DVC may
+    # run render_views, which needs only mesh_gen, before rrt_skts)
+    ran = seg("c2", None, rrt_skts=30.0, render_views=20.0)
+    ran["stages"]["render_views"]["first_s"], ran["stages"]["rrt_skts"]["first_s"] = 5.0, 40.0
+    totals = stage_totals([ran])
+    assert "render_views" in totals and "rrt_skts" not in totals
