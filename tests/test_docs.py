@@ -261,7 +261,7 @@ def test_table_one_adds_the_seed_spread_or_says_why_not():
 
 def test_check_fails_on_an_edited_figure_and_the_tool_repairs_it(tmp_path, capsys):
     for rel in ("README.md", "docs/presets.md", docs_results.METRICS, docs_results.BENCH,
-                docs_results.SCALING):
+                docs_results.SCALING, docs_results.PAPER_METRICS):
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / rel, tmp_path / rel)
     readme = tmp_path / "README.md"
@@ -313,4 +313,4 @@ def test_paper_table_one_has_the_published_and_default_rows_beside_it():
     assert "| SKT-Hang | default | seeds |" in table
     assert "| `sctdn` | 60.0 [50.0–70.0] | 90.0 | 80.0 | 70.0 | 50.0 | 83.7 | 53.5 | 60.0 [55.0–70.0] |" in table
     paper["seeds"] = {"status": "stale", "reason": "made from other inputs"}
-    assert "not merged yet (made from other inputs)" in docs_results.paper_table_one(paper, default)
+    assert "seed step (two more seeds" in docs_results.paper_table_one(paper, default)

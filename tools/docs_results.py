@@ -214,8 +214,9 @@ def paper_table_one(paper: dict, default: dict) -> str:
         lines.append(row(f"`{m}`{best_of}", m, "success"))
         if "success_single" in e:
             lines.append(row(f"`{m}`, one SKT", m, "success_single"))
-    if seeds and not merged:
-        lines += ["", f"Over training seeds: not merged yet ({seeds['reason']})."]
+    if not merged:
+        lines += ["", "One training seed: `make paper`'s seed step (two more seeds for every "
+                      "learned method) has not merged yet."]
     return "\n".join(lines)
 
 
