@@ -41,7 +41,7 @@ class Prediction:
     skt: Skt
     points: np.ndarray  # (N, 3) the cloud the model saw, support frame, metres
     counts: dict  # cleaning: points in and removed per step
-    warnings: tuple[str, ...] = ()  # the cloud does not look like a training view (cloud_checks)
+    warnings: tuple[str, ...] = ()  # the frame or the cloud may be off (wall_frame, cloud_checks)
     camera_to_support: np.ndarray | None = None  # (4, 4) the frame --camera found
 
 
@@ -94,8 +94,8 @@ def predict_camera(predictor: SktPredictor, points: np.ndarray, up: np.ndarray |
                              "millimetres — was it in metres already? (drop --units mm)")
     wf = support_frame(a, up, name=name)
     pred = predict_cloud(predictor, wf.points, "m", None, seed, name)
-    return Prediction(pred.skt, pred.points, {**pred.counts, "n_wall": wf.n_wall}, pred.warnings,
-                      wf.camera_to_support)
+    return Prediction(pred.skt, pred.points, {**pred.counts, "n_wall": wf.n_wall},
+                      wf.warnings + pred.warnings, wf.camera_to_support)
 
 
 def _waypoints(frames: np.ndarray) -> list[dict]:

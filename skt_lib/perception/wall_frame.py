@@ -19,9 +19,17 @@ hook meets the wall (``skt predict --camera``).
    is the generated supports' convention: a plate reaching 2.5 cm past the lowest arm's
    root, the frame at that root (a double hook's sits at its lower arm, not the plate's
    centre).
+5. **The check** of that lower edge: the wall must be seen in a band below the footprint
+   (``below_gap_m`` under its lower edge, ``below_band_m`` tall, across its width; the gap
+   clears the shadow a 1 cm plate casts seen from above). A camera high above a hook sees
+   its arm in front of the plate's lower part, and a noisy one loses the plate's face at
+   that angle: the footprint then ends too high, and so does the frame, by 1–3 cm, with
+   nothing else amiss. Where less than ``min_below_seen`` of the band's ``below_cell_m``
+   cells hold a wall point, the frame carries a warning.
 
 What is returned: the camera-to-support transform and the structure's points, wall removed,
-in the support frame — what the predictor's training views show.
+in the support frame — what the predictor's training views show — and the check's
+warnings.
 """
 
 from dataclasses import dataclass, replace
@@ -57,6 +65,10 @@ class WallSettings:
     min_structure_points: int = 100
     seed: int = 0  # RANSAC's seed
     noise_k: float = 4.0  # the wall's band is at least this many σ of its depth noise
+    below_gap_m: float = 0.015  # the check's band starts this far below the footprint ...
+    below_band_m: float = 0.016  # ... and is this tall
+    below_cell_m: float = 0.004  # its cells (twice the voxel)
+    min_below_seen: float = 0.6  # share of its cells holding a wall point (validation views)
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +77,9 @@ class WallFrame:
     points: np.ndarray  # (K, 3) the structure, support frame, wall removed
     n_wall: int  # points on the wall plane (after downsampling)
     n_in: int  # points after downsampling
+    #: share of the band below the footprint where the wall is seen (the check, step 5)
+    below_seen: float = 1.0
+    warnings: tuple[str, ...] = ()  # one line each: why the frame may be off
 
 
 def _ransac(points: np.ndarray, s: WallSettings) -> np.ndarray:
@@ -157,11 +172,21 @@ def support_frame(points: np.ndarray, up: np.ndarray | None = None,
         raise InputError(f"{name}: no structure stands off the wall plane (no cluster of ≥ "
                          f"{s.min_structure_points} points reaching within "
                          f"{100 * s.touch_m:.1f} cm of it) — is the hook in view?")
-    origin = rot.T @ np.array([-d, *_mount(structure @ rot.T, -d, s)])  # on the plane
+    foot = _footprint(structure @ rot.T, -d, s)
+    origin = rot.T @ np.array([-d, *_mount(foot, s)])  # on the plane
     t = np.eye(4)
     t[:3, :3] = rot
     t[:3, 3] = -rot @ origin
-    return WallFrame(t, structure @ rot.T + t[:3, 3], int(wall.sum()), len(a))
+    seen = below_seen((a @ rot.T)[np.abs(height) <= s.off_wall_m, 1:], foot, s)
+    warnings = ()
+    if seen < s.min_below_seen:
+        warnings = (f"{name}: the wall below the hook's foot is hidden from this camera "
+                    f"({100 * seen:.0f} % of the band {100 * s.below_gap_m:.1f}–"
+                    f"{100 * (s.below_gap_m + s.below_band_m):.1f} cm under it seen, need ≥ "
+                    f"{100 * s.min_below_seen:.0f} %): the foot's lower edge, and so the "
+                    "frame's height, may be a centimetre or more off — view the hook from "
+                    "lower down, or pass --frame with a known pose",)
+    return WallFrame(t, structure @ rot.T + t[:3, 3], int(wall.sum()), len(a), seen, warnings)
 
 
 def wall_noise(height: np.ndarray) -> float:
@@ -183,13 +208,32 @@ def _for_noise(s: WallSettings, sigma: float) -> WallSettings:
                    footprint_m=s.footprint_m + grow)
 
 
-def _mount(local: np.ndarray, wall_x: float, s: WallSettings) -> np.ndarray:
-    """(y, z) of the mount from the structure ``local`` in the support axes (x of the wall
-    plane ``wall_x``): across, the footprint's centre; up, ``mount_above_m`` over its lower
-    edge, or its centre when it is lower than twice that."""
-    foot = local[local[:, 0] - wall_x <= s.footprint_m, 1:]
-    (y_lo, z_lo), (y_hi, z_hi) = np.quantile(foot, [0.01, 0.99], axis=0)
+def _footprint(local: np.ndarray, wall_x: float, s: WallSettings) -> np.ndarray:
+    """``[[y_lo, z_lo], [y_hi, z_hi]]``: the box (1–99 % quantiles) of the footprint, the
+    points of the structure ``local`` (support axes; the wall plane at x = ``wall_x``)
+    within ``footprint_m`` of the wall."""
+    return np.quantile(local[local[:, 0] - wall_x <= s.footprint_m, 1:], [0.01, 0.99], axis=0)
+
+
+def _mount(foot: np.ndarray, s: WallSettings) -> np.ndarray:
+    """(y, z) of the mount from the footprint's box: across, its centre; up,
+    ``mount_above_m`` over its lower edge, or its centre when it is lower than twice that."""
+    (y_lo, z_lo), (y_hi, z_hi) = foot
     return np.array([(y_lo + y_hi) / 2, min(z_lo + s.mount_above_m, (z_lo + z_hi) / 2)])
+
+
+def below_seen(wall_yz: np.ndarray, foot: np.ndarray, s: WallSettings) -> float:
+    """Share of the ``below_cell_m`` cells of the band under the footprint (``foot``, as
+    :func:`_footprint` gives it; the band ``below_gap_m`` under its lower edge,
+    ``below_band_m`` tall, across its width) that hold at least one of the wall's points
+    ``wall_yz (M, 2)`` (support axes y, z)."""
+    (y_lo, z_lo), (y_hi, _) = foot
+    cell = s.below_cell_m
+    lo = np.array([y_lo, z_lo - s.below_gap_m - s.below_band_m])
+    shape = np.maximum(1, np.round([(y_hi - y_lo) / cell, s.below_band_m / cell]).astype(int))
+    idx = np.floor((wall_yz - lo) / cell).astype(int)
+    inside = (idx >= 0).all(1) & (idx < shape).all(1)
+    return len(np.unique(idx[inside], axis=0)) / int(np.prod(shape))
 
 
 def _structure(off: np.ndarray, height: np.ndarray, s: WallSettings) -> np.ndarray | None:

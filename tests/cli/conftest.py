@@ -63,9 +63,11 @@ def save_ply(path: Path, points: np.ndarray) -> Path:
     return path
 
 
-def camera_cloud(data_root: Path, view: int = 10) -> tuple[np.ndarray, np.ndarray]:
-    """A depth camera's raw cloud (camera frame, the wall in view, the sensor model at its
-    default severity) of the easy test support, with the true camera-to-support pose."""
+def camera_cloud(data_root: Path, view: int = 10, severity: float = 1.0
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """A depth camera's raw cloud (camera frame, the wall in view, the sensor model at
+    ``severity``, 1 its default) of the easy test support, with the true camera-to-support
+    pose."""
     from skt_lib.config.params_file import load_params
     from skt_lib.geometry.export import read_obj
     from skt_lib.io import read_table
@@ -78,5 +80,5 @@ def camera_cloud(data_root: Path, view: int = 10) -> tuple[np.ndarray, np.ndarra
     (mesh,) = read_obj(data_root / "mesh_gen" / rows.loc[EASY_SUPPORT, "mesh_path"])
     pose = support_cameras(mesh, p)[view].pose()
     seen = camera_view(CameraScene(mesh), pose, Intrinsics(p.width, p.height, p.fov_deg),
-                       SensorModel(), np.random.default_rng(0))
+                       SensorModel().at(severity), np.random.default_rng(0))
     return seen.points, pose

@@ -187,3 +187,29 @@ def test_camera_mode_finds_the_frame_and_writes_the_skt_in_both_frames(capsys, d
     assert "camera" not in plain
     assert plain["warnings"] and all("pass --camera" in w and "--frame" in w
                                      for w in plain["warnings"]), plain["warnings"]
+
+
+def test_camera_mode_warns_where_the_frame_may_be_centimetres_off(capsys, data_root, tmp_path):
+    """From the ring's steepest corners with a noisy camera (severity 3) the hook's foot is
+    partly hidden and the frame's origin ends high: the JSON and stderr say so and what to
+    do, and a frame within 5 mm is not warned about from a camera level with the hook."""
+    from skt_lib.geometry.se3 import invert
+
+    off = 0
+    for view, severity in ((35, 3.0), (41, 3.0), (17, 1.0)):
+        points, pose = camera_cloud(data_root, view, severity)
+        np.save(tmp_path / "raw.npy", points)
+        rc, _, err = run_skt(capsys, "predict", tmp_path / "raw.npy", "--model",
+                             data_root / "train", "-o", tmp_path / "out.json", "--camera",
+                             "--up", *map(str, pose[:3, :3].T @ [0.0, 0.0, 1.0]))
+        assert rc == 0, err
+        doc = json.loads((tmp_path / "out.json").read_text())
+        e = np.array(doc["camera"]["camera_to_support"]) @ invert(pose)
+        hidden = [w for w in doc["warnings"] if "the wall below the hook's foot is hidden" in w]
+        if np.linalg.norm(e[:3, 3]) > 0.005:
+            assert len(hidden) == 1 and "--frame" in hidden[0], (view, doc["warnings"])
+            assert f"warning: {hidden[0]}" in err
+            off += 1
+        if severity == 1.0:
+            assert hidden == [] and np.linalg.norm(e[:3, 3]) <= 0.005
+    assert off >= 1  # the corners' frames are that far off: the check is exercised

@@ -232,3 +232,66 @@ def test_a_noisy_camera_still_finds_the_frame(level):
                                  pose))
     t_mm, r_deg = np.array(errors).T
     assert t_mm.max() <= 5.0 and r_deg.max() <= 2.0, (t_mm.round(1), r_deg.round(2))
+
+
+def _generated(level: str, seed: int):
+    from skt_lib.config.params_file import load_params
+    from skt_lib.geometry.supports import sample_support
+
+    p = load_params("params.yaml").mesh_gen
+    shape, _ = sample_support(np.random.default_rng(seed), level, p)
+    mesh = union(shape.parts())
+    centre = (mesh.vertices.min(0) + mesh.vertices.max(0)) / 2
+    return mesh, viewpoints(centre, 0.35, (-60.0, 60.0), (-20.0, 55.0), 7, 6)
+
+
+@pytest.mark.parametrize("level", ["normal", "hard"])
+def test_steep_noisy_views_are_within_tolerance_or_warned(level):
+    """The top row of render_views' ring (55° above) at severity 3: the arm hides the
+    plate's lower part and the noise its face, and the frame's origin ends 1–3 cm high from
+    the far corners. No frame may be off by more than 5 mm / 2° without a warning that says
+    why; the far corners' frames are that far off (the test would pass vacuously otherwise)."""
+    mesh, cams = _generated(level, 4)
+    off_and_warned = 0
+    for i in range(35, 42):
+        pose = cams[i].pose()
+        view = camera_view(CameraScene(mesh), pose, K, SensorModel().at(3.0),
+                           np.random.default_rng(0))
+        wf = support_frame(view.points, _gravity_up(pose), name="scan.ply")
+        t_mm, r_deg = _error(wf.camera_to_support, pose)
+        if t_mm > 5.0 or r_deg > 2.0:
+            assert len(wf.warnings) == 1, (i, t_mm, wf.below_seen)
+            assert wf.warnings[0].startswith("scan.ply: the wall below the hook's foot is hidden")
+            assert "--frame" in wf.warnings[0]
+            off_and_warned += t_mm > 10.0
+    assert off_and_warned >= 2
+
+
+@pytest.mark.parametrize("level", ["easy", "normal", "hard", "very_hard"])
+def test_views_at_the_default_severity_carry_no_warning(level):
+    """At severity 1 the frame is right from every row of the ring, and the check stays
+    quiet: the wall is seen under the foot."""
+    mesh, cams = _generated(level, 3)
+    for i in (0, 9, 17, 25, 33, 38):
+        pose = cams[i].pose()
+        view = camera_view(CameraScene(mesh), pose, K, SensorModel(), np.random.default_rng(i))
+        wf = support_frame(view.points, _gravity_up(pose))
+        assert wf.warnings == () and wf.below_seen >= 0.6, (i, wf.below_seen)
+
+
+def test_below_seen_is_the_share_of_the_bands_cells_holding_a_wall_point():
+    """The band under a footprint y ∈ [0, 4 cm], z from 0: 1.5–3.1 cm below it, 10 × 4
+    cells of 4 mm. A dense wall fills it; the wall with its left half gone fills half; wall
+    points outside the band count for nothing."""
+    from skt_lib.perception.wall_frame import WallSettings, below_seen
+
+    s = WallSettings()
+    foot = np.array([[0.0, 0.0], [0.04, 0.05]])
+    y, z = np.meshgrid(np.arange(-0.02, 0.06, 0.001), np.arange(-0.05, 0.0, 0.001))
+    wall = np.c_[y.ravel(), z.ravel()] + 0.0005
+    assert below_seen(wall, foot, s) == 1.0
+    assert below_seen(wall[wall[:, 0] >= 0.02], foot, s) == 0.5
+    outside = wall[(wall[:, 1] > -0.015) | (wall[:, 1] < -0.031) | (wall[:, 0] > 0.04)]
+    assert below_seen(outside, foot, s) == 0.0
+    one = np.array([[0.001, -0.02]])  # one point: one cell of 40
+    assert below_seen(one, foot, s) == pytest.approx(1 / 40)
