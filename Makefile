@@ -134,8 +134,10 @@ camera: $(STAMP)
 
 train-diagnostics: $(STAMP)
 	@# short seeded SCTDN runs (overfit one batch, learning curve, contact term, train vs
-	@# val) into reports/train/diagnostics.{json,md}; needs the artifacts of `make repro`
+	@# val) into reports/train/diagnostics.{json,md}, and how far the templates lie from the
+	@# labels (reports/train/template_reach.*); needs the artifacts of `make repro`
 	$(BIN)/python tools/train_diagnostics.py
+	$(BIN)/python tools/template_reach.py
 
 clean-env:
 	rm -rf $(VENV)
