@@ -1,8 +1,9 @@
 """A zoo of meshes a user might bring to ``skt import-support`` / ``skt import-object``:
 the generator's own families at three resolutions (up to ≥ 250k faces), hooks no family
 makes (forks with two and three prongs, a pigtail, a flat spiral, coat hooks, a rack,
-knobbed pegs), meshes with small holes and several bodies, millimetres, rotated frames, and
-objects (mugs with thin handles, scissors, rings); with the inputs that must be refused.
+knobbed pegs), meshes with small holes and several bodies, a closed one with a hairline
+slit, millimetres, rotated frames, and objects (mugs with thin handles, scissors, rings);
+with the inputs that must be refused.
 
 Every mesh is built here, from the project's own primitives (:mod:`skt_lib.geometry.convex`)
 and trimesh, so the tests write the zoo themselves. Each :class:`Case` says what a correct
@@ -176,6 +177,25 @@ def drilled_peg() -> trimesh.Trimesh:
     return trimesh.boolean.difference([solid, drill], engine="manifold")
 
 
+def slit_hook(gap_m: float = 15e-9) -> trimesh.Trimesh:
+    """A flat-cut hook (8 mm thick: plate, arm, upturned tip) with a hairline slit ``gap_m``
+    wide up into its plate from the lower edge: one closed body whose surface passes within
+    ``gap_m`` of itself, its vertices across the slit that close (a weld by distance alone
+    pinches them into non-manifold edges)."""
+    a, b = 0.005 - gap_m / 2, 0.005 + gap_m / 2
+    xs, zs = (0.0, a, b, PLATE_THICKNESS_M, 0.072, 0.08), (-0.03, -0.015, -0.004, 0.004, 0.03)
+    cells = [(i, j) for i in range(3) for j in range(4) if (i, j) != (1, 0)]  # the slit: (1, 0)
+    cells += [(3, 2), (4, 2), (4, 3)]  # the arm, the tip
+    index: dict = {}
+    quads = [((i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)) for i, j in cells]
+    tris = [[index.setdefault(c, len(index)) for c in (q[0], *pair)] for q in quads
+            for pair in ((q[1], q[2]), (q[2], q[3]))]
+    xz = np.array([(xs[i], zs[j]) for i, j in index])  # dicts keep insertion order
+    m = trimesh.creation.extrude_triangulation(xz, np.array(tris), 0.008)
+    x, z, y = m.vertices.T  # the profile's plane is the support's x-z
+    return trimesh.Trimesh(np.c_[x, y - 0.004, z], m.faces[:, ::-1], process=False)
+
+
 def two_bodies() -> trimesh.Trimesh:
     """A peg and a knob written as two separate, overlapping bodies."""
     pts = _Path(WALL, 10).straight(0.08).array()
@@ -275,6 +295,7 @@ def cases() -> list[Case]:
         Case("small_holes", "support", lambda: with_small_holes(j_hook())),
         Case("drilled_peg", "support", drilled_peg, fmt="obj"),
         Case("two_bodies", "support", two_bodies, fmt="obj"),
+        Case("slit_hook", "support", slit_hook),
         Case("j_hook_mm", "support", lambda: in_mm(j_hook()), args=("--units", "mm")),
         Case("j_hook_rotated", "support", lambda: rotated(j_hook()), args=ROTATED_ARGS,
              fmt="glb"),

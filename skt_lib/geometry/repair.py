@@ -1,6 +1,8 @@
 """Meshes from outside (OBJ, STL, PLY, GLB…): read, check units, repair, simplify.
 
-A user's mesh is repaired where that is safe — duplicate vertices merged, faces that
+A user's mesh is repaired where that is safe — duplicate vertices merged (equal ones
+everywhere; ones within :data:`WELD_M` only where the surface is open, so a closed solid
+whose surface passes within that of itself stays as the file gives it), faces that
 collapsed onto an edge or a point (a repeated vertex) dropped, winding made consistent and
 outward, small open boundary loops capped, overlapping bodies united — and refused with
 the reason otherwise. Faces of zero area whose three vertices are distinct are kept: in a
@@ -88,14 +90,18 @@ def _cap_loops(tm: trimesh.Trimesh, name: str) -> trimesh.Trimesh:
     return trimesh.Trimesh(np.array(verts), np.array(faces), process=False)
 
 
-def weld(vertices: np.ndarray, faces: np.ndarray, tol: float = WELD_M
-         ) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices closer than ``tol`` made one (by distance, not by rounding: two copies of a
-    vertex a float32 rounding apart can fall either side of a rounding boundary), then faces
-    left with a repeated vertex dropped. Unreferenced vertices stay (harmless)."""
+def weld(vertices: np.ndarray, faces: np.ndarray, tol: float = WELD_M,
+         only: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices closer than ``tol`` (0: equal) made one (by distance, not by rounding: two
+    copies of a vertex a float32 rounding apart can fall either side of a rounding
+    boundary), then faces left with a repeated vertex dropped; ``only`` (bool per vertex):
+    only pairs with at least one of these (an open edge's end may close onto a vertex of
+    the closed part, as at a T-junction). Unreferenced vertices stay (harmless)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     parent = np.arange(len(vertices))
     pairs = cKDTree(vertices).query_pairs(tol, output_type="ndarray")
+    if only is not None and len(pairs):
+        pairs = pairs[only[pairs[:, 0]] | only[pairs[:, 1]]]
     if len(pairs):
         graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
                            shape=(len(vertices),) * 2)
@@ -107,13 +113,28 @@ def weld(vertices: np.ndarray, faces: np.ndarray, tol: float = WELD_M
     return vertices, f[keep]
 
 
+def _welded(vertices, faces, tol: float, only: np.ndarray | None = None) -> trimesh.Trimesh:
+    """:func:`weld`, duplicate faces and unreferenced vertices removed."""
+    tm = trimesh.Trimesh(*weld(vertices, faces, tol, only), process=False)
+    tm.update_faces(tm.unique_faces())
+    tm.remove_unreferenced_vertices()
+    return tm
+
+
+def _on_open_edges(tm: trimesh.Trimesh) -> np.ndarray:
+    """Per vertex: whether it ends an edge only one face has (the surface is open there)."""
+    uniq, count = np.unique(tm.edges_sorted, axis=0, return_counts=True)
+    out = np.zeros(len(tm.vertices), bool)
+    out[uniq[count == 1].ravel()] = True
+    return out
+
+
 def repair(mesh: Mesh, name: str) -> Mesh:
     """A closed, consistently wound, outward solid from ``mesh``, or :class:`MeshError`
     saying why not."""
-    verts, faces = weld(mesh.vertices, mesh.faces)
-    tm = trimesh.Trimesh(verts, faces, process=False)
-    tm.update_faces(tm.unique_faces())
-    tm.remove_unreferenced_vertices()
+    tm = _welded(mesh.vertices, mesh.faces, 0.0)  # exact copies (an STL's per-face vertices)
+    if not tm.is_watertight:  # near copies too, where the surface is open and only there
+        tm = _welded(tm.vertices, tm.faces, WELD_M, _on_open_edges(tm))
     if not tm.is_watertight:
         tm = _cap_loops(tm, name)
         tm.merge_vertices()

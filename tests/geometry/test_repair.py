@@ -4,6 +4,7 @@ surface kept, and dense meshes simplified to the budget within a measured distan
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import cKDTree
 
 from skt_lib.errors import MeshError
 from skt_lib.geometry.convex import Mesh
@@ -52,6 +53,41 @@ def test_vertices_a_float32_rounding_apart_are_welded():
     assert len(np.unique(faces)) == 8
     assert trimesh.Trimesh(welded, faces, process=False).is_watertight
     assert repair(Mesh(v, f), "soup").volume == pytest.approx(0.04 * 0.03 * 0.02, rel=1e-6)
+
+
+def test_a_closed_solid_passing_within_the_weld_distance_of_itself_stays_as_it_is():
+    """The zoo's slit hook: its surface comes within 15 nm of itself across the slit, ten
+    vertex pairs closer than WELD_M. It is closed already, so nothing is welded: the same
+    faces and volume come back (a weld by distance pinched the slit's ends into non-manifold
+    edges and refused the hook), and a copy of it as an STL's soup closes the same way."""
+    from skt_lib.cli.mesh_zoo import slit_hook
+    from skt_lib.geometry.repair import WELD_M
+
+    tm = slit_hook()
+    closed = trimesh.Trimesh(tm.vertices, tm.faces)  # merged, as trimesh reads an STL
+    assert closed.is_watertight and closed.is_winding_consistent and closed.body_count == 1
+    assert len(cKDTree(closed.vertices).query_pairs(WELD_M)) >= 6
+    out = repair(Mesh(closed.vertices, closed.faces), "slit_hook.stl")
+    assert len(out.faces) == len(closed.faces)
+    assert out.volume == pytest.approx(closed.volume, rel=1e-9)
+    soup = closed.vertices[closed.faces].reshape(-1, 3)
+    again = repair(Mesh(soup, np.arange(len(soup)).reshape(-1, 3)), "soup")
+    assert len(again.faces) == len(closed.faces)
+    assert again.volume == pytest.approx(closed.volume, rel=1e-9)
+
+
+def test_near_copies_are_welded_only_where_the_surface_is_open():
+    """``only``: of two pairs of vertices within the tolerance, the pair with neither vertex
+    in ``only`` is left apart, a pair with one in it (an open edge closing onto the closed
+    part) is welded."""
+    v = np.array([[0, 0, 0], [1e-8, 0, 0], [1, 0, 0], [1 + 1e-8, 0, 0], [0, 1, 0.0]])
+    f = np.array([[0, 2, 4], [1, 3, 4]])
+    _, faces = weld(v, f, 1e-7, only=np.array([False, False, True, True, False]))
+    np.testing.assert_array_equal(faces, [[0, 2, 4], [1, 2, 4]])
+    _, faces = weld(v, f, 1e-7, only=np.array([True, False, False, False, False]))
+    np.testing.assert_array_equal(faces, [[0, 2, 4], [0, 3, 4]])
+    _, faces = weld(v, f, 1e-7)
+    np.testing.assert_array_equal(faces, [[0, 2, 4], [0, 2, 4]])
 
 
 def test_a_large_hole_is_still_refused():
