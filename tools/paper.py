@@ -225,6 +225,18 @@ def stage_totals(segments: list[dict]) -> dict[str, dict]:
     return {name: done[name] for name in STAGES if name in done}
 
 
+#: Reports in the workspace that ``make paper`` does not write: the clone's copies of the
+#: default's (the benchmarks, the tests' mutation scores, ``make camera``, ``make
+#: train-diagnostics``), which must not pass for the paper run's.
+NOT_COLLECTED = ("bench", "tests", "camera", "diagnostics.*", "template_reach.*")
+
+
+def _written(ws: Path, path: str) -> bool:
+    """Whether anything under ``path`` in the workspace differs from its checkout (written by
+    the run) or is new."""
+    return bool(git("status", "--porcelain", "--untracked-files=all", "--", path, cwd=ws).strip())
+
+
 def collect(ws: Path, dest: Path, commit: str) -> dict:
     """The workspace's reports, params, lock and run figures into ``dest`` (replaced whole)."""
     segments = json.loads((ws / "logs" / "paper-segments.json").read_text())
@@ -244,7 +256,9 @@ def collect(ws: Path, dest: Path, commit: str) -> dict:
     }
     tmp = dest.with_name(dest.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
-    shutil.copytree(ws / "reports", tmp, ignore=shutil.ignore_patterns("bench", "tests"))
+    shutil.copytree(ws / "reports", tmp, ignore=shutil.ignore_patterns(*NOT_COLLECTED))
+    if not _written(ws, "reports/seeds"):  # the default's seeds, as the clone checked them out
+        shutil.rmtree(tmp / "seeds", ignore_errors=True)
     for name in ("params.yaml", "dvc.lock"):
         shutil.copy2(ws / name, tmp / name)
     (tmp / "run.json").write_text(json.dumps(run, indent=1) + "\n")  # stages in pipeline order
