@@ -1,6 +1,8 @@
 """mesh_gen end to end on tiny params: contract, byte-identical reruns, worker-count independence."""
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -14,11 +16,23 @@ from skt_lib.schemas import OBJECTS, SUPPORTS
 from stages import mesh_gen
 
 
-def _run(tmp_path, write_params, params, name):
+def _run(tmp_path, write_params, params, name, fresh_process=False):
+    """mesh_gen on ``params``; ``fresh_process`` runs it as ``python -m stages.mesh_gen``.
+
+    A process pool forked from this process after an in-process run can hang: manifold3d's
+    TBB thread pool does not survive a fork (the workers wait on threads the child lacks).
+    The stage itself always starts from a fresh interpreter (dvc), so a run with workers
+    does too here."""
     path = write_params(params, f"{name}.yaml")
     data, rep = tmp_path / name / "data", tmp_path / name / "reports"
-    assert mesh_gen.main(["--params", str(path), "--data-dir", str(data),
-                          "--reports-dir", str(rep)]) == 0
+    argv = ["--params", str(path), "--data-dir", str(data), "--reports-dir", str(rep)]
+    if fresh_process:
+        done = subprocess.run([sys.executable, "-m", "stages.mesh_gen", *argv],
+                              cwd=Path(__file__).resolve().parents[1],
+                              capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr[-3000:]
+    else:
+        assert mesh_gen.main(argv) == 0
     return data, rep
 
 
@@ -62,7 +76,7 @@ def test_contract_and_determinism(tmp_path, write_params, tiny_dict):
 
     # same seed again, now on 2 workers: byte-identical tables and mesh files
     tiny_dict["compute"]["n_workers"] = 2
-    data_b, rep_b = _run(tmp_path, write_params, tiny_dict, "b")
+    data_b, rep_b = _run(tmp_path, write_params, tiny_dict, "b", fresh_process=True)
     assert _files(data) == _files(data_b)
     assert (rep / "metrics.json").read_bytes() == (rep_b / "metrics.json").read_bytes()
 
