@@ -2,6 +2,7 @@
 and the exit-code convention (an expected error is an :class:`~skt_lib.errors.InputError`
 or another :class:`~skt_lib.errors.SktError`, reported on one line with exit code 2)."""
 
+import argparse
 import json
 import sys
 from collections.abc import Iterator
@@ -16,11 +17,23 @@ from tqdm import tqdm
 from skt_lib.errors import DataError, InputError
 
 if TYPE_CHECKING:
+    from skt_lib.cli.flow_readout import FlowReadout
     from skt_lib.learning.predictor import SktPredictor
 
 EXIT_BAD_INPUT = 2
 CLOUD_SUFFIXES = (".ply", ".pcd", ".npy", ".npz", ".xyz", ".txt")
 UNITS = {"m": 1.0, "mm": 0.001}
+
+
+def count_arg(value: str) -> int:
+    """An argparse type: a whole number from 1 to 100 (proposals, samples)."""
+    try:
+        n = int(value)
+    except ValueError:
+        n = 0
+    if not 1 <= n <= 100:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 1 to 100, got {value!r}")
+    return n
 
 
 def existing_file(path: str | Path, what: str) -> Path:
@@ -100,13 +113,26 @@ def read_frame(path: str | Path) -> np.ndarray:
     return t
 
 
-def load_predictor(model_dir: str | Path) -> "SktPredictor":
-    from skt_lib.learning.predictor import SktPredictor  # PyTorch: only where a model is loaded
+def load_predictor(model_dir: str | Path, n_samples: int | None = None,
+                   seed: int = 0) -> "SktPredictor | FlowReadout":
+    """The one-SKT predictor in ``model_dir``: an ``skt_flow`` folder (``skt_flow.json``,
+    as ``train_baselines`` writes it) gives a :class:`~skt_lib.cli.flow_readout.FlowReadout`
+    (``n_samples`` samples, its default where None; noise seeded with ``seed``), any other
+    an SCTDN :class:`~skt_lib.learning.predictor.SktPredictor` (``train``'s folder)."""
+    # PyTorch: only where a model is loaded
+    from skt_lib.cli.flow_readout import N_SAMPLES, FlowReadout
+    from skt_lib.learning.predictor import SktPredictor
 
     d = Path(model_dir)
     if not d.is_dir():
-        raise InputError(f"{d}: no such model folder (train one with `dvc repro train`)")
+        raise InputError(f"{d}: no such model folder (`make repro` trains skt_flow into "
+                         "data/train_baselines/skt_flow and SCTDN into data/train)")
     try:
+        if (d / "skt_flow.json").is_file():
+            return FlowReadout.load(d, N_SAMPLES if n_samples is None else n_samples, seed)
+        if n_samples is not None:
+            raise InputError(f"--samples goes with an skt_flow model; {d} holds no "
+                             "skt_flow.json")
         return SktPredictor.load(d)
     except DataError as err:
         raise InputError(str(err)) from None

@@ -12,14 +12,13 @@ file given for ``--support`` or ``--object`` is imported first, as ``skt import-
 real one's folders, or into the real one with ``--keep``.
 """
 
-import argparse
 import os
 import tempfile
 import time
 from pathlib import Path
 from types import SimpleNamespace
 
-from skt_lib.cli.common import progress
+from skt_lib.cli.common import count_arg, progress
 from skt_lib.config.params_file import load_params
 from skt_lib.config.sim_eval import METHODS
 from skt_lib.errors import InputError
@@ -38,16 +37,6 @@ EXAMPLE = """example:
   skt hang --support support_00003 --object object_mug_001 --method vatmart --proposals 10"""
 
 
-def _count(value: str) -> int:
-    try:
-        n = int(value)
-    except ValueError:
-        n = 0
-    if not 1 <= n <= 100:
-        raise argparse.ArgumentTypeError(f"expected a whole number from 1 to 100, got {value!r}")
-    return n
-
-
 def add_parser(sub) -> None:
     ap = sub.add_parser("hang", help="hang an object on a support in simulation and record it",
                         description=__doc__.splitlines()[0], epilog=EXAMPLE)
@@ -60,11 +49,12 @@ def add_parser(sub) -> None:
     ap.add_argument("--keep", action="store_true",
                     help="keep mesh files' imports in <data-root>/user/ (default: a temporary "
                          "folder)")
-    ap.add_argument("--method", choices=METHODS, default="sctdn", metavar="METHOD",
-                    help="SKT method, any of sim_eval's (default: sctdn): learned, with a trained "
+    ap.add_argument("--method", choices=METHODS, default="skt_flow", metavar="METHOD",
+                    help="SKT method, any of sim_eval's (default: skt_flow, the best one-SKT "
+                         "method on validation; its first proposal): learned, with a trained "
                          f"model — {', '.join(LEARNED)}; privileged, built from the support's "
                          f"ground-truth SKT — {', '.join(PRIVILEGED)}")
-    ap.add_argument("--proposals", type=_count, metavar="N",
+    ap.add_argument("--proposals", type=count_arg, metavar="N",
                     help=f"{' and '.join(PROPOSING)} only: run up to N of the method's "
                          "proposals in order until one hangs (sim_eval's best-of-N; default 1: "
                          "the first proposal alone)")

@@ -1,5 +1,9 @@
 """``skt predict CLOUD``: the SKT of a user's partial cloud of a supporting item.
 
+The model is SCTDN (``train``'s folder) or ``skt_flow`` (``train_baselines``' folder: its
+samples ordered by the cloud check, the first one; :mod:`skt_lib.cli.flow_readout`), told
+apart by the folder's config file.
+
 The cloud is scaled to metres (``--units``), moved into the support frame (``--frame``, or
 ``--camera``: the frame found from the wall in view, :mod:`skt_lib.perception.wall_frame`),
 cleaned (:func:`skt_lib.perception.pointcloud.clean_cloud`), brought to the model's N points
@@ -16,22 +20,28 @@ from pathlib import Path
 import numpy as np
 
 from skt_lib.cli.cloud_checks import check_support_cloud
-from skt_lib.cli.common import UNITS, load_predictor, progress, read_cloud, read_frame
+from skt_lib.cli.common import UNITS, count_arg, load_predictor, progress, read_cloud, read_frame
 from skt_lib.errors import InputError
 from skt_lib.geometry.se3 import invert, matrix_to_quat, transform_points
 from skt_lib.io import write_json_atomic
+from skt_lib.cli.flow_readout import N_SAMPLES, FlowReadout
 from skt_lib.learning.predictor import Skt, SktPredictor
 from skt_lib.perception.pointcloud import clean_cloud, median_radius, sample_to
 from skt_lib.perception.wall_frame import support_frame
 
-SCHEMA, SCHEMA_VERSION = "skt", 2
+SCHEMA, SCHEMA_VERSION = "skt", 3
 #: A cloud said to be in millimetres whose median radius is below this (m) was in metres.
 MIN_MEDIAN_RADIUS_M = 0.002
 #: ... and, with --camera, whose median range from the camera is below this (m).
 MIN_MEDIAN_RANGE_M = 0.02
 
+#: The default model: skt_flow, the best one-SKT method on validation (docs/cli.md says by how
+#: much); ``--model data/train`` runs SCTDN, the paper's.
+DEFAULT_MODEL = "data/train_baselines/skt_flow"
+
 EXAMPLE = """example:
-  skt predict hook.ply --model data/train -o skt.json --rrd skt.rrd
+  skt predict hook.ply -o skt.json --rrd skt.rrd           # skt_flow, the default model
+  skt predict hook.ply --model data/train -o sctdn.json    # SCTDN, the paper's network
   skt predict scan.npy --units mm --frame cam_to_support.json
   skt predict raw_depth.ply --camera --up 0 -1 0     # camera frame, wall in view"""
 
@@ -68,7 +78,7 @@ def prepare_cloud(points: np.ndarray, n: int, units: str = "m", frame: np.ndarra
     return sample_to(cleaned.points, n, rng), {**cleaned.counts, "n_points": n}, warnings
 
 
-def predict_cloud(predictor: SktPredictor, points: np.ndarray, units: str = "m",
+def predict_cloud(predictor: SktPredictor | FlowReadout, points: np.ndarray, units: str = "m",
                   frame: np.ndarray | None = None, seed: int = 0, name: str = "points"
                   ) -> Prediction:
     cloud, counts, warnings = prepare_cloud(points, predictor.cfg.n_points, units, frame, seed,
@@ -80,7 +90,7 @@ def predict_cloud(predictor: SktPredictor, points: np.ndarray, units: str = "m",
     return Prediction(predictor.predict(cloud), cloud, counts, tuple(warnings))
 
 
-def predict_camera(predictor: SktPredictor, points: np.ndarray, up: np.ndarray | None,
+def predict_camera(predictor: SktPredictor | FlowReadout, points: np.ndarray, up: np.ndarray | None,
                    units: str = "m", seed: int = 0, name: str = "points") -> Prediction:
     """A raw camera-frame cloud with the wall in view: the support frame found from it
     (:func:`~skt_lib.perception.wall_frame.support_frame`; ``up`` in the camera frame, or
@@ -103,22 +113,32 @@ def _waypoints(frames: np.ndarray) -> list[dict]:
             for f in frames]
 
 
-def skt_record(pred: Prediction, source: str, model: str) -> dict:
-    """The JSON document of docs/cli.md (schema ``skt`` v2; ``camera`` only with --camera)."""
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def model_kind(predictor) -> str:
+    return "skt_flow" if isinstance(predictor, FlowReadout) else "sctdn"
+
+
+def skt_record(pred: Prediction, source: str, model: str, kind: str = "sctdn") -> dict:
+    """The JSON document of docs/cli.md (schema ``skt`` v3; ``camera`` only with --camera).
+    ``kind``: the model's, ``sctdn`` or ``skt_flow`` (no families: ``family`` and its
+    probability are null)."""
     skt = pred.skt
     record = {
         "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
         "frame": "support", "units": "m", "quaternion_order": "xyzw",
-        "source": source, "model": model,
+        "source": source, "model": model, "model_kind": kind,
         "T": len(skt.positions),
         "waypoints": _waypoints(skt.frames),
-        "family": skt.family,
+        "family": skt.family if skt.family >= 0 else None,
         "contact_point": np.asarray(skt.contact).tolist(),
         "points": pred.points.tolist(),
         "affordance": np.asarray(skt.affordance, dtype=np.float64).tolist(),
         "cleaning": pred.counts,
         "confidence": {  # a controller may decline an SKT below its own thresholds
-            "family_probability": skt.family_probability,
+            "family_probability": _finite_or_none(skt.family_probability),
             "affordance_peak": float(np.max(skt.affordance)),
         },
         "warnings": list(pred.warnings),
@@ -152,7 +172,9 @@ def add_parser(sub) -> None:
     ap = sub.add_parser("predict", help="predict the SKT of a partial point cloud of a hook",
                         description=__doc__.splitlines()[0], epilog=EXAMPLE)
     ap.add_argument("cloud", help="point cloud: .ply .pcd .npy .npz .xyz .txt (N×3)")
-    ap.add_argument("--model", default="data/train", help="trained model folder (default: data/train)")
+    ap.add_argument("--model", default=DEFAULT_MODEL,
+                    help=f"trained model folder: skt_flow's (train_baselines/skt_flow) or "
+                         f"SCTDN's (train) (default: {DEFAULT_MODEL})")
     ap.add_argument("--frame", help="JSON 4×4 camera-to-support transform (metres); "
                                     "without it the cloud is taken to be in the support frame")
     ap.add_argument("--camera", action="store_true",
@@ -165,8 +187,20 @@ def add_parser(sub) -> None:
     ap.add_argument("--units", choices=sorted(UNITS), default="m", help="units of the cloud")
     ap.add_argument("-o", "--output", default="skt.json", help="SKT JSON to write (default: skt.json)")
     ap.add_argument("--rrd", help="also write a Rerun recording: cloud, affordance, template, SKT")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the sampling to N points")
+    ap.add_argument("--seed", type=int, default=0,
+                    help="seed of the sampling to N points (and of skt_flow's noise)")
+    ap.add_argument("--samples", type=count_arg, metavar="N",
+                    help=f"skt_flow models only: samples drawn, the clearest by the cloud check "
+                         f"is the SKT (default {N_SAMPLES}, as Table I's skt_flow row)")
     ap.set_defaults(run=run)
+
+
+def _references(predictor, pred: Prediction) -> dict[str, np.ndarray]:
+    """What the recording shows beside the SKT: SCTDN's family template, aligned at the
+    contact; skt_flow's other samples, clearest first."""
+    if isinstance(predictor, FlowReadout):
+        return {f"samples/{i}": p for i, p in enumerate(pred.skt.fallbacks, start=1)}
+    return {"template": predictor.predict(pred.points, deform=False).positions}
 
 
 def _camera_args(args) -> None:
@@ -184,30 +218,33 @@ def run(args) -> int:
         points = read_cloud(args.cloud)
         frame = read_frame(args.frame) if args.frame else None
         bar.update()
-        predictor = load_predictor(args.model)
+        predictor = load_predictor(args.model, args.samples, args.seed)
         bar.update()
         if args.camera:
             up = None if args.level else np.asarray(args.up, float)
             pred = predict_camera(predictor, points, up, args.units, args.seed, args.cloud)
         else:
             pred = predict_cloud(predictor, points, args.units, frame, args.seed, args.cloud)
-        template = predictor.predict(pred.points, deform=False)
+        kind = model_kind(predictor)
         bar.update()
-        record = skt_record(pred, str(args.cloud), str(args.model))
+        record = skt_record(pred, str(args.cloud), str(args.model), kind)
         if args.rrd:
             from skt_lib.cli.rrd import log_prediction
 
-            log_prediction(Path(args.rrd), pred, template.positions)
+            log_prediction(Path(args.rrd), pred, _references(predictor, pred))
         write_json_atomic(args.output, record)
         bar.update()
     for w in pred.warnings:
         print(f"warning: {w}", file=sys.stderr)
     c = np.round(pred.skt.contact, 4).tolist()
-    print(f"{args.output}: SKT of {record['T']} waypoints, family {pred.skt.family}, contact {c} m "
+    chosen = (f"family {pred.skt.family} (probability {pred.skt.family_probability:.2f})"
+              if kind == "sctdn" else
+              f"the clearest of {predictor.n_samples} skt_flow samples")
+    print(f"{args.output}: SKT of {record['T']} waypoints, {chosen}, contact {c} m "
           f"(cleaning kept {len(pred.points)} of {pred.counts['n_in']} points: "
           f"{pred.counts['non_finite']} non-finite, {pred.counts['outliers']} outliers, "
-          f"{pred.counts['off_cluster']} off the structure); family probability "
-          f"{pred.skt.family_probability:.2f}, affordance peak {np.max(pred.skt.affordance):.2f}")
+          f"{pred.counts['off_cluster']} off the structure); affordance peak "
+          f"{np.max(pred.skt.affordance):.2f}")
     if pred.camera_to_support is not None:
         origin = invert(pred.camera_to_support)[:3, 3].round(4).tolist()
         print(f"support frame from the wall: origin {origin} m in the camera frame "

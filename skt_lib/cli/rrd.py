@@ -9,14 +9,16 @@ from viz.rerun_log import affordance_colors, log_colored_points, log_points, log
 _USER = "world/supports/user"
 
 
-def log_prediction(path: Path, pred, template: np.ndarray) -> None:
-    """The cloud coloured by affordance, the contact point, the family's template and the
-    deformed SKT (support frame); written atomically."""
+def log_prediction(path: Path, pred, references: dict[str, np.ndarray]) -> None:
+    """The cloud coloured by affordance, the contact point, the SKT (support frame) and, in
+    grey, ``references``: SCTDN's family template (``template``), or skt_flow's other samples
+    (``samples/1`` …, clearest first); written atomically."""
     with recording("skt_predict", path, "skt predict") as rec:
         log_colored_points(rec, f"{_USER}/cloud", pred.points,
                            affordance_colors(pred.skt.affordance), static=True)
         log_points(rec, f"{_USER}/contact", [pred.skt.contact], labels=["contact"], static=True)
-        log_strip(rec, f"{_USER}/template", template, rgb=(150, 150, 150), static=True)
+        for name, positions in references.items():
+            log_strip(rec, f"{_USER}/{name}", positions, rgb=(150, 150, 150), static=True)
         log_strip(rec, f"{_USER}/skt", pred.skt.positions, static=True)
 
 

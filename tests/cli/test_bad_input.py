@@ -51,6 +51,14 @@ def _corrupt_model(t, d):
     return m
 
 
+def _corrupt_flow(t, d):
+    m = t / "flow"
+    m.mkdir()
+    shutil.copy(d / "train_baselines" / "skt_flow" / "skt_flow.json", m / "skt_flow.json")
+    _write(m / "skt_flow.pt", b"PK\x03\x04 not a checkpoint")
+    return m
+
+
 # (row name, builder (tmp, data root, view, params) -> (args, what the message must name))
 ROWS = {
     "missing file": lambda t, d, v, p: (_predict(t / "nope.ply", d), "nope.ply: no such"),
@@ -126,6 +134,12 @@ ROWS = {
     "missing model folder": lambda t, d, v, p: (
         ["predict", _npy(t / "x.npy", v), "--model", t / "no_model", "-o", "OUT/skt.json"],
         "no_model: no such model folder"),
+    "--samples with an SCTDN folder": lambda t, d, v, p: (
+        _predict(_npy(t / "x.npy", v), d, "--samples", "3"),
+        "--samples goes with an skt_flow model; "),
+    "corrupt skt_flow checkpoint": lambda t, d, v, p: (
+        ["predict", _npy(t / "x.npy", v), "--model", _corrupt_flow(t, d), "-o", "OUT/skt.json"],
+        "cannot load the skt_flow checkpoint"),
     "corrupt checkpoint": lambda t, d, v, p: (
         ["predict", _npy(t / "x.npy", v), "--model", _corrupt_model(t, d), "-o", "OUT/skt.json"],
         "cannot load the SCTDN checkpoint"),

@@ -41,13 +41,14 @@ FIVE_MINUTES = (
 )
 #: the "your own cloud, object and hook" commands (README and docs/cli.md), run in order
 OWN_FILES = (
-    "skt predict hook.ply --model data/train -o skt.json --rrd skt.rrd",
+    "skt predict hook.ply -o skt.json --rrd skt.rrd",
+    "skt predict hook.ply --model data/train -o sctdn.json",
     "skt predict scan.npy --units mm --frame cam_to_support.json",
     "skt predict raw.ply --camera --up 0 -1 0 -o skt.json",
     "skt predict raw.ply --camera --up 0 -1 0",
     "skt import-object my_mug.obj --name my_mug",
     "skt import-support my_hook.stl --units mm",
-    "skt hang --support support_00008 --object my_mug --method sctdn --rrd hang.rrd",
+    "skt hang --support support_00008 --object my_mug --rrd hang.rrd",
     "skt hang --support support_00008 --object my_mug --method oracle --rrd hang.rrd",
     "skt hang --support support_00008 --object object_mug_000 --method vatmart --proposals 10",
 )
@@ -132,6 +133,8 @@ def test_your_own_files_commands_run_as_documented(capsys, checkout, view):
             doc = json.loads(Path(written).read_text())
             assert doc["warnings"] == [], (command, doc["warnings"])  # looks like a training view
             assert len(doc["waypoints"]) == doc["T"]
+            # the default model is skt_flow's; --model data/train is SCTDN's
+            assert doc["model_kind"] == ("sctdn" if "data/train" in words else "skt_flow")
             assert out.startswith(f"{written}: SKT of {doc['T']} waypoints"), out
             if "--camera" in words:  # the frame found from the wall: within 5 mm and 2°
                 err_t = doc["camera"]["camera_to_support"] @ invert(pose)
@@ -147,7 +150,9 @@ def test_your_own_files_commands_run_as_documented(capsys, checkout, view):
             assert rec["skts"], out
         else:  # hang: one verdict line, for the pair asked
             support, obj = words[words.index("--support") + 1], words[words.index("--object") + 1]
-            assert re.search(rf"^\S+ {support} × {obj}: (success|failed: \w+)", out, re.M), out
+            method = words[words.index("--method") + 1] if "--method" in words else "skt_flow"
+            assert re.search(rf"^{method} {support} × {obj}: (success|failed: \w+)", out,
+                             re.M), out
             if "--proposals" in words:
                 assert re.search(r"proposal \d+ of 10", out), out
         if "--rrd" in words:

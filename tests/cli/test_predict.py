@@ -29,7 +29,8 @@ def test_predict_ply_and_npy_give_the_models_skt(capsys, data_root, view, tmp_pa
     predictor = SktPredictor.load(data_root / "train")
     cloud, counts, warnings = prepare_cloud(view, predictor.cfg.n_points)
     skt = predictor.predict(cloud)
-    assert a["schema"] == "skt" and a["schema_version"] == 2 and a["T"] == predictor.cfg.T
+    assert a["schema"] == "skt" and a["schema_version"] == 3 and a["T"] == predictor.cfg.T
+    assert a["model_kind"] == "sctdn"
     pos = np.array([w["position"] for w in a["waypoints"]])
     np.testing.assert_allclose(pos, skt.positions, atol=1e-12)
     rot = np.stack([quat_to_matrix(w["quat"]) for w in a["waypoints"]])
@@ -43,6 +44,54 @@ def test_predict_ply_and_npy_give_the_models_skt(capsys, data_root, view, tmp_pa
                                "affordance_peak": float(np.max(skt.affordance))}
     assert 1 / 5 < skt.family_probability <= 1  # a probability, above chance (k = 5 families)
     assert (tmp_path / "a.rrd").stat().st_size > 0
+
+
+def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, data_root, view,
+                                                                     tmp_path):
+    """A train_baselines/skt_flow folder as --model: the SKT is the first of the flow's N
+    samples (noise seeded with --seed) as the cloud check orders them, the JSON says so and
+    carries no family; another seed draws another SKT; --samples sets N."""
+    from skt_lib.learning.flow import FlowPredictor
+
+    np.save(tmp_path / "hook.npy", view)
+    model = data_root / "train_baselines" / "skt_flow"
+
+    def run(name, *extra):
+        rc, out, err = run_skt(capsys, "predict", tmp_path / "hook.npy", "--model", model,
+                               "-o", tmp_path / f"{name}.json", *extra)
+        assert rc == 0, err
+        return json.loads((tmp_path / f"{name}.json").read_text()), out
+
+    a, out = run("a", "--rrd", tmp_path / "a.rrd")
+    flow = FlowPredictor.load(model)
+    cloud, counts, _ = prepare_cloud(view, flow.cfg.n_points)
+    want = flow.propose(cloud, np.random.default_rng(0), 10)
+    pos = np.array([w["position"] for w in a["waypoints"]])
+    np.testing.assert_allclose(pos, want[0].positions, atol=1e-12)
+    # the tiny model's samples lie close together, but not within the tolerance above: the
+    # first sample, not any
+    assert min(np.abs(w.positions - pos).max() for w in want[1:]) > 1e-8
+    assert a["model_kind"] == "skt_flow" and a["family"] is None
+    assert a["confidence"]["family_probability"] is None
+    assert a["contact_point"] == want[0].contact.tolist() and a["cleaning"] == counts
+    assert "clearest of 10 skt_flow samples" in out
+    assert (tmp_path / "a.rrd").stat().st_size > 0
+    b, _ = run("b", "--seed", "0")
+    assert b["waypoints"] == a["waypoints"]  # the same seed: the same SKT
+    c, _ = run("c", "--samples", "3")
+    want3 = flow.propose(cloud, np.random.default_rng(0), 3)
+    np.testing.assert_allclose([w["position"] for w in c["waypoints"]], want3[0].positions,
+                               atol=1e-12)
+    d, _ = run("d", "--seed", "1")
+    assert d["waypoints"] != a["waypoints"]
+
+
+def test_samples_goes_with_an_skt_flow_model(capsys, data_root, view, tmp_path):
+    np.save(tmp_path / "hook.npy", view)
+    rc, _, err = run_skt(capsys, "predict", tmp_path / "hook.npy", "--model", data_root / "train",
+                         "--samples", "3", "-o", tmp_path / "x.json")
+    assert rc == 2 and "--samples goes with an skt_flow model" in err
+    assert not (tmp_path / "x.json").exists()
 
 
 def test_millimetre_cloud_refused_then_converted(capsys, data_root, view, tmp_path):
