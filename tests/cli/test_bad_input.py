@@ -43,19 +43,13 @@ def _ball():
     return np.random.default_rng(6).normal(0, 0.05, (5000, 3)) + [0.0, 0.0, 0.4]
 
 
-def _corrupt_model(t, d):
+def _corrupt(t, model_dir, name):
+    """A copy of ``model_dir`` in ``t`` with its config ``name.json`` and a corrupt
+    ``name.pt``."""
     m = t / "model"
     m.mkdir()
-    shutil.copy(d / "train" / "sctdn.json", m / "sctdn.json")
-    _write(m / "sctdn.pt", b"PK\x03\x04 not a checkpoint")
-    return m
-
-
-def _corrupt_flow(t, d):
-    m = t / "flow"
-    m.mkdir()
-    shutil.copy(d / "train_baselines" / "skt_flow" / "skt_flow.json", m / "skt_flow.json")
-    _write(m / "skt_flow.pt", b"PK\x03\x04 not a checkpoint")
+    shutil.copy(model_dir / f"{name}.json", m / f"{name}.json")
+    _write(m / f"{name}.pt", b"PK\x03\x04 not a checkpoint")
     return m
 
 
@@ -138,10 +132,12 @@ ROWS = {
         _predict(_npy(t / "x.npy", v), d, "--samples", "3"),
         "--samples goes with an skt_flow model; "),
     "corrupt skt_flow checkpoint": lambda t, d, v, p: (
-        ["predict", _npy(t / "x.npy", v), "--model", _corrupt_flow(t, d), "-o", "OUT/skt.json"],
+        ["predict", _npy(t / "x.npy", v), "--model",
+         _corrupt(t, d / "train_baselines" / "skt_flow", "skt_flow"), "-o", "OUT/skt.json"],
         "cannot load the skt_flow checkpoint"),
     "corrupt checkpoint": lambda t, d, v, p: (
-        ["predict", _npy(t / "x.npy", v), "--model", _corrupt_model(t, d), "-o", "OUT/skt.json"],
+        ["predict", _npy(t / "x.npy", v), "--model", _corrupt(t, d / "train", "sctdn"), "-o",
+         "OUT/skt.json"],
         "cannot load the SCTDN checkpoint"),
     "unknown --method": lambda t, d, v, p: (_hang(d, p, method="magic"), "invalid choice: 'magic'"),
     "--proposals 0": lambda t, d, v, p: (_hang(d, p, EASY_SUPPORT, OBJECT, "vatmart",
@@ -163,7 +159,8 @@ ROWS = {
               t / "no_model"),
         "no_model: no such model folder: --method vatmart_mod needs"),
     "corrupt VAT-Mart checkpoint": lambda t, d, v, p: (
-        _hang(d, p, EASY_SUPPORT, OBJECT, "vatmart", "--model", _corrupt_vatmart(t, d)),
+        _hang(d, p, EASY_SUPPORT, OBJECT, "vatmart", "--model",
+              _corrupt(t, d / "train_baselines" / "vatmart", "vatmart")),
         "cannot load the VAT-Mart checkpoint"),
     "privileged method, support without a ground-truth SKT": lambda t, d, v, p: (
         _hang(d, p, _without_skt(d), OBJECT, "omnihang"),
@@ -206,14 +203,6 @@ def _without(t, d, stage):
         if entry.name not in (stage, "user"):
             (root / entry.name).symlink_to(entry, target_is_directory=True)
     return root
-
-
-def _corrupt_vatmart(t, d):
-    m = t / "model"
-    m.mkdir()
-    shutil.copy(d / "train_baselines" / "vatmart" / "vatmart.json", m / "vatmart.json")
-    _write(m / "vatmart.pt", b"PK\x03\x04 not a checkpoint")
-    return m
 
 
 def _without_skt(d) -> str:
