@@ -15,8 +15,9 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
 - ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded;
 - ``skt_flow_inference_ms_median``: skt_flow, batch 1, points in → ``sim_eval.n_proposals``
   samples ordered by the cloud check (the first is the SKT it executes), model loaded;
-- ``cli_predict_ms_median``: ``skt predict``'s prediction of a 1000-point view (cleaning,
-  sampling, SCTDN), model loaded, process start excluded;
+- ``cli_predict_ms_median``: ``skt predict``'s prediction of a 1000-point view with its
+  default model (cleaning, sampling, skt_flow's 10 samples and the cloud check), model
+  loaded, process start excluded;
 - ``sim_trials_per_min``: sim_eval trials (Panda; the oracle's and SCTDN's SKTs, every test
   object) per minute of wall time on ``compute.n_workers`` workers, over ``per_level`` test
   supports per level, with the default executor; ``*_previous`` with the one before it
@@ -63,7 +64,8 @@ def sim_bench(params, root: Path, per_level: int) -> dict:
 
 def cli_bench(root: Path) -> dict:
     cloud = read_npz(sorted((root / "render_views").glob("*.npz"))[0], RENDER_SPEC)["points"][0]
-    return {"cli_predict_ms_median": median_predict_ms(root / "train", cloud)}
+    return {"cli_predict_ms_median": median_predict_ms(root / "train_baselines" / "skt_flow",
+                                                       cloud)}
 
 
 #: The bench's parts, in the order they run, and the key prefixes each one writes.

@@ -59,7 +59,8 @@ BENCH_ROWS = {
                                                   "runs), model loaded; "
                                                   "median of 100 after 10 warm-up"),
     "cli_predict_ms_median": ("{:.0f} ms", "`skt predict`'s prediction of a 1000-point view: "
-                                           "cleaning, sampling, SCTDN; model loaded, process start "
+                                           "cleaning, sampling, skt_flow (the default model); model "
+                                           "loaded, process start "
                                            "excluded; median of 30 after 3 warm-up"),
     "sim_trials_per_min": ("{:.0f}", "`sim_eval` trials (Panda; the oracle's and SCTDN's SKTs, "
                                      "every test object) per minute of wall time, "
@@ -168,12 +169,14 @@ def table_one(metrics: dict) -> str:
     return "\n".join(lines)
 
 
-def _seed_cell(metrics: dict, method: str) -> str:
+def _seed_cell(metrics: dict, method: str, key: str = "success") -> str:
+    """All over training seeds, mean [min–max]; ``key``: ``success`` or ``success_single``
+    (a proposing method's first proposal)."""
     b = (metrics.get("seeds") or {}).get(method)
-    if not isinstance(b, dict) or "success_mean" not in b or b["success_mean"]["all"] is None:
+    if not isinstance(b, dict) or f"{key}_mean" not in b or b[f"{key}_mean"]["all"] is None:
         return "–"
-    return (f"{_pct(b['success_mean']['all'])} [{_pct(b['success_min']['all'])}–"
-            f"{_pct(b['success_max']['all'])}]")
+    return (f"{_pct(b[f'{key}_mean']['all'])} [{_pct(b[f'{key}_min']['all'])}–"
+            f"{_pct(b[f'{key}_max']['all'])}]")
 
 
 def paper_table_one(paper: dict, default: dict) -> str:
@@ -205,7 +208,7 @@ def paper_table_one(paper: dict, default: dict) -> str:
         d = (default.get(m) or {}).get(key) or {}
         cells.append(_pct(d.get("all")))
         if merged:
-            cells.append(_seed_cell(paper, m) if key == "success" else "–")
+            cells.append(_seed_cell(paper, m, key))
         return f"| {label} | " + " | ".join(cells) + " |"
 
     for m in table_methods(paper):
