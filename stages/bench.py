@@ -43,7 +43,7 @@ from pathlib import Path
 
 from skt_lib import speed
 from skt_lib.cli.mesh_zoo import bench_dense_imports
-from skt_lib.cli.predict import median_predict_ms
+from skt_lib.cli.predict import DEFAULT_MODEL, median_predict_ms
 from skt_lib.config.params_file import load_params
 from skt_lib.io import read_npz, write_json_atomic
 from skt_lib.perception.views import RENDER_SPEC
@@ -64,8 +64,8 @@ def sim_bench(params, root: Path, per_level: int) -> dict:
 
 def cli_bench(root: Path) -> dict:
     cloud = read_npz(sorted((root / "render_views").glob("*.npz"))[0], RENDER_SPEC)["points"][0]
-    return {"cli_predict_ms_median": median_predict_ms(root / "train_baselines" / "skt_flow",
-                                                       cloud)}
+    model = root / Path(DEFAULT_MODEL).relative_to("data")  # skt predict's default model
+    return {"cli_predict_ms_median": median_predict_ms(model, cloud)}
 
 
 #: The bench's parts, in the order they run, and the key prefixes each one writes.

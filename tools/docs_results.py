@@ -59,9 +59,9 @@ BENCH_ROWS = {
                                                   "runs), model loaded; "
                                                   "median of 100 after 10 warm-up"),
     "cli_predict_ms_median": ("{:.0f} ms", "`skt predict`'s prediction of a 1000-point view: "
-                                           "cleaning, sampling, skt_flow (the default model); model "
-                                           "loaded, process start "
-                                           "excluded; median of 30 after 3 warm-up"),
+                                           "cleaning, sampling, skt_flow (the default "
+                                           "model); model loaded, process start excluded; "
+                                           "median of 30 after 3 warm-up"),
     "sim_trials_per_min": ("{:.0f}", "`sim_eval` trials (Panda; the oracle's and SCTDN's SKTs, "
                                      "every test object) per minute of wall time, "
                                      "`compute.n_workers` workers, the default executor "

@@ -27,8 +27,6 @@ class FlowReadout:
     :meth:`skt_lib.learning.predictor.SktPredictor.predict` (``family`` is -1: the flow has
     no template families, and ``family_probability`` is NaN)."""
 
-    kind = "skt_flow"
-
     def __init__(self, flow: FlowPredictor, n_samples: int = N_SAMPLES, seed: int = 0):
         if n_samples < 1:
             raise ValueError(f"n_samples: need at least one, got {n_samples}")
@@ -36,14 +34,13 @@ class FlowReadout:
         self.cfg = flow.cfg
 
     @classmethod
-    def load(cls, directory: str | Path, n_samples: int = N_SAMPLES, seed: int = 0) -> "FlowReadout":
+    def load(cls, directory: str | Path, n_samples: int = N_SAMPLES,
+             seed: int = 0) -> "FlowReadout":
         return cls(FlowPredictor.load(directory), n_samples, seed)
 
-    def samples(self, points: np.ndarray) -> list[Skt]:
-        """Every sample, clearest by the cloud check first."""
-        return self.flow.propose(points, np.random.default_rng(self.seed), self.n_samples)
-
     def predict(self, points: np.ndarray) -> Skt:
-        first, *others = self.samples(points)
+        """The clearest sample by the cloud check; the others, in that order, its fallbacks."""
+        first, *others = self.flow.propose(points, np.random.default_rng(self.seed),
+                                           self.n_samples)
         return Skt(first.positions, first.frames, first.family, first.contact,
                    first.affordance, fallbacks=tuple(s.positions for s in others))

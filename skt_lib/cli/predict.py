@@ -21,10 +21,10 @@ import numpy as np
 
 from skt_lib.cli.cloud_checks import check_support_cloud
 from skt_lib.cli.common import UNITS, count_arg, load_predictor, progress, read_cloud, read_frame
+from skt_lib.cli.flow_readout import N_SAMPLES, FlowReadout
 from skt_lib.errors import InputError
 from skt_lib.geometry.se3 import invert, matrix_to_quat, transform_points
 from skt_lib.io import write_json_atomic
-from skt_lib.cli.flow_readout import N_SAMPLES, FlowReadout
 from skt_lib.learning.predictor import Skt, SktPredictor
 from skt_lib.perception.pointcloud import clean_cloud, median_radius, sample_to
 from skt_lib.perception.wall_frame import support_frame
@@ -90,8 +90,9 @@ def predict_cloud(predictor: SktPredictor | FlowReadout, points: np.ndarray, uni
     return Prediction(predictor.predict(cloud), cloud, counts, tuple(warnings))
 
 
-def predict_camera(predictor: SktPredictor | FlowReadout, points: np.ndarray, up: np.ndarray | None,
-                   units: str = "m", seed: int = 0, name: str = "points") -> Prediction:
+def predict_camera(predictor: SktPredictor | FlowReadout, points: np.ndarray,
+                   up: np.ndarray | None, units: str = "m", seed: int = 0,
+                   name: str = "points") -> Prediction:
     """A raw camera-frame cloud with the wall in view: the support frame found from it
     (:func:`~skt_lib.perception.wall_frame.support_frame`; ``up`` in the camera frame, or
     ``None`` for a level camera), the wall removed, then as :func:`predict_cloud`."""
@@ -186,7 +187,8 @@ def add_parser(sub) -> None:
                     help="with --camera: the camera is held level (image rows horizontal)")
     ap.add_argument("--units", choices=sorted(UNITS), default="m", help="units of the cloud")
     ap.add_argument("-o", "--output", default="skt.json", help="SKT JSON to write (default: skt.json)")
-    ap.add_argument("--rrd", help="also write a Rerun recording: cloud, affordance, template, SKT")
+    ap.add_argument("--rrd", help="also write a Rerun recording: cloud, affordance, SKT, and "
+                                   "SCTDN's template or skt_flow's other samples")
     ap.add_argument("--seed", type=int, default=0,
                     help="seed of the sampling to N points (and of skt_flow's noise)")
     ap.add_argument("--samples", type=count_arg, metavar="N",
