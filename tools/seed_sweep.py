@@ -12,8 +12,11 @@ regenerates the whole dataset (other supports, other test set; ~35 min a seed he
 mixes the data's variance into the model's. Here only the training seed moves.
 
 Writes ``data/seed_sweep/seed_<s>/`` (models and sim_eval outputs, git-ignored scratch: an
-interrupted run resumes from it; it is wiped when the inputs it was made from differ from
-the stamp it was made under) and ``reports/seeds/seed_runs.json`` (every extra seed's
+interrupted run resumes from it. Two stamps say what it was made from: ``models.sha256``
+(:func:`skt_lib.eval.seeds.models_key`: training's data, code and params) and
+``inputs.sha256`` (:func:`skt_lib.eval.seeds.inputs_key`: everything the trials' outcomes
+depend on). When the first differs the scratch is wiped; when only the second does, the
+seed's models are kept and only its ``sim_eval`` runs again) and ``reports/seeds/seed_runs.json`` (every extra seed's
 per-pair outcomes with :func:`skt_lib.eval.seeds.inputs_key`; a ``sim_eval`` dependency).
 ``make seeds`` then reruns ``sim_eval``, which merges the seeds into Table I and
 ``reports/sim_eval/metrics.json`` (``seeds.<method>.success_mean`` …). The pipeline must be
@@ -31,7 +34,7 @@ import yaml
 from skt_lib.config.params_file import load_params
 from skt_lib.eval.methods import MODEL_OF
 from skt_lib.eval.protocol import per_pair
-from skt_lib.eval.seeds import SEEDED, inputs_key, runs_document
+from skt_lib.eval.seeds import SEEDED, inputs_key, models_key, runs_document
 from skt_lib.io import read_table, write_json_atomic
 from skt_lib.learning.data import load_training_set
 from skt_lib.learning.pointnet2 import geometry_memo
@@ -40,6 +43,11 @@ from skt_lib.learning.train import from_params, train_sctdn
 from skt_lib.learning.train_baselines import train_baseline
 from skt_lib.schemas import TRIALS
 from stages import sim_eval
+
+
+#: A seed scratch's stamps (module docstring) and what its evaluation wrote.
+MODELS_STAMP, OUTCOMES_STAMP = "models.sha256", "inputs.sha256"
+EVALUATED = ("sim_eval", "reports", "params.yaml")
 
 
 def train_models(params, root: Path, seed: int, out: Path, methods) -> None:
@@ -97,13 +105,24 @@ def evaluate(params_path: Path, root: Path, out: Path, methods) -> pd.DataFrame:
     return per_pair(read_table(trials, TRIALS))
 
 
-def fresh_scratch(out: Path, key: str) -> None:
-    """Keep ``out`` (resume) only when its stamp is ``key``; else start it empty, stamped."""
-    stamp = out / "inputs.sha256"
-    if out.exists() and not (stamp.is_file() and stamp.read_text() == key):
+def fresh_scratch(out: Path, models: str, outcomes: str) -> None:
+    """Keep ``out`` (resume) only when its stamps are ``models`` and ``outcomes``; keep its
+    models alone when only ``outcomes`` differs; else start it empty. Stamps it."""
+    def stamped(name: str, key: str) -> bool:
+        return (out / name).is_file() and (out / name).read_text() == key
+
+    if out.exists() and not stamped(MODELS_STAMP, models):
         shutil.rmtree(out)
+    elif out.exists() and not stamped(OUTCOMES_STAMP, outcomes):
+        for name in EVALUATED:
+            path = out / name
+            if path.is_dir():
+                shutil.rmtree(path)
+            elif path.exists():
+                path.unlink()
     out.mkdir(parents=True, exist_ok=True)
-    stamp.write_text(key)
+    (out / MODELS_STAMP).write_text(models)
+    (out / OUTCOMES_STAMP).write_text(outcomes)
 
 
 def main(argv=None) -> int:
@@ -123,13 +142,14 @@ def main(argv=None) -> int:
         print(f"ERROR: {args.params}: sim_eval.methods runs none of {list(SEEDED)}",
               file=sys.stderr)
         return 2
-    key = inputs_key(args.params.resolve().parent)
+    repo = args.params.resolve().parent
+    key, models = inputs_key(repo), models_key(repo)
     base = params.common.seed
     pairs = {}
     for seed in range(base + 1, base + args.seeds):
         out = (args.scratch or args.data_root / "seed_sweep") / f"seed_{seed}"
         print(f"seed {seed}: {methods} → {out}", flush=True)
-        fresh_scratch(out, key)
+        fresh_scratch(out, models, key)
         train_models(params, args.data_root, seed, out, methods)
         pairs[seed] = evaluate(args.params, args.data_root, out, methods)
     path = args.reports / "seeds" / "seed_runs.json"

@@ -77,6 +77,23 @@ def inputs_key(repo: Path) -> str:
     return h.hexdigest()
 
 
+def models_key(repo: Path) -> str:
+    """sha256 of what an extra training seed's *models* depend on, in ``repo``: the
+    ``dvc.lock`` entries of :data:`MODEL_STAGES` without their outputs (their data and code
+    dependencies' hashes and their params), less their figure code (``viz/``). A change that leaves training alone — to ``sim_eval``, its
+    params, or an upstream stage's code that writes the same bytes — keeps it, so a seed's
+    models outlive it and only its trials run again."""
+    lock_path = repo / "dvc.lock"
+    stages = yaml.safe_load(lock_path.read_text())["stages"] if lock_path.is_file() else {}
+    h = hashlib.sha256()
+    for name in MODEL_STAGES:
+        entry = {k: v for k, v in stages.get(name, {}).items() if k != "outs"}
+        entry["deps"] = [d for d in entry.get("deps", [])
+                         if not d.get("path", "").startswith("viz/")]
+        h.update(json.dumps([name, entry], sort_keys=True).encode())
+    return h.hexdigest()
+
+
 def runs_document(key: str, pairs_by_seed: dict[int, pd.DataFrame]) -> dict:
     """The ``seed_runs.json`` document of extra seeds' per-pair outcomes (each a
     :func:`~skt_lib.eval.protocol.per_pair` table of one seed's ``sim_eval``; every seed

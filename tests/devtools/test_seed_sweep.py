@@ -6,21 +6,35 @@ import pytest
 from tools.seed_sweep import fresh_scratch, main
 
 
-def test_scratch_is_kept_for_the_same_key_and_wiped_for_another(tmp_path):
+def test_scratch_is_kept_for_the_same_keys_its_models_alone_for_other_trial_inputs(tmp_path):
     out = tmp_path / "data" / "seed_sweep" / "seed_2"
-    fresh_scratch(out, "k1")
-    (out / "model.pt").write_text("trained")
-    fresh_scratch(out, "k1")  # the same inputs: resume
-    assert (out / "model.pt").read_text() == "trained"
 
-    fresh_scratch(out, "k2")  # the data, code or params changed
-    assert not (out / "model.pt").exists() and (out / "inputs.sha256").read_text() == "k2"
+    def made(models: str, outcomes: str) -> None:
+        fresh_scratch(out, models, outcomes)
+        for name in ("train", "sim_eval", "reports"):
+            (out / name).mkdir(exist_ok=True)
+            (out / name / "x").write_text(name)
+        (out / "params.yaml").write_text("sim_eval: {}")
+
+    made("m1", "k1")
+    fresh_scratch(out, "m1", "k1")  # the same inputs: resume, everything kept
+    assert all((out / n / "x").exists() for n in ("train", "sim_eval", "reports"))
+
+    fresh_scratch(out, "m1", "k2")  # sim_eval's code or params changed, training's did not
+    assert (out / "train" / "x").read_text() == "train"
+    assert not any((out / n).exists() for n in ("sim_eval", "reports", "params.yaml"))
+    assert (out / "inputs.sha256").read_text() == "k2"
+
+    made("m1", "k2")
+    fresh_scratch(out, "m2", "k2")  # training's data, code or params changed
+    assert sorted(p.name for p in out.iterdir()) == ["inputs.sha256", "models.sha256"]
+    assert (out / "models.sha256").read_text() == "m2"
 
     legacy = tmp_path / "data" / "seed_sweep" / "seed_3"  # made before stamps: not trusted
-    legacy.mkdir()
-    (legacy / "model.pt").write_text("old")
-    fresh_scratch(legacy, "k2")
-    assert not (legacy / "model.pt").exists()
+    (legacy / "train").mkdir(parents=True)
+    (legacy / "inputs.sha256").write_text("k2")  # an outcomes stamp alone vouches for no model
+    fresh_scratch(legacy, "m2", "k2")
+    assert not (legacy / "train").exists()
 
 
 def test_fewer_than_two_seeds_is_refused(tmp_path, capsys):

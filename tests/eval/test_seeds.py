@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from skt_lib.errors import DataError
-from skt_lib.eval.seeds import inputs_key, runs_document, seed_block
+from skt_lib.eval.seeds import inputs_key, models_key, runs_document, seed_block
 from viz.report import Report
 from viz.sim_eval_report import _seeds_section
 
@@ -63,6 +63,18 @@ def test_the_key_follows_data_code_and_params_but_not_models_reports_or_its_own_
         change()
         seen.add(inputs_key(repo))
     assert len(seen) == len(changes) + 1
+
+
+def test_the_models_key_follows_training_inputs_only(tmp_path):
+    repo = _repo(tmp_path)
+    _lock(repo, views="v1", train_outs="m1", train_deps="c1", sim_eval="e1")
+    key = models_key(repo)
+    _lock(repo, views="v2", train_outs="m2", train_deps="c1", sim_eval="e2")
+    (repo / "params.yaml").write_text("sim_eval: {n_record: 0}\n")
+    (repo / "stages/sim_eval.py").write_text("run(faster=True)\n")
+    assert models_key(repo) == key  # upstream entries, its own outputs, sim_eval: not training's
+    _lock(repo, views="v2", train_outs="m2", train_deps="c2", sim_eval="e2")
+    assert models_key(repo) != key  # training's code (or data, or params) changed
 
 
 def _pairs(flags: dict[str, list[int]]) -> pd.DataFrame:
