@@ -142,7 +142,7 @@ def test_object(object_id: str, category: str, urdf: str, mesh_path: str, keypoi
     p = params.sim_eval
     (mesh,) = read_obj(mesh_path)
     grasps = grasp_candidates(mesh.vertices, keypoint, tuple(p.grasp_pitch_deg), p.grasp_rolls_deg,
-                              yaws_deg=p.grasp_yaws_deg)
+                              yaws_deg=p.grasp_yaws_deg, sphere=p.grasp_sphere_directions)
     radius = float(np.linalg.norm(mesh.vertices - keypoint[:3, 3], axis=1).max())
     return TestObject(object_id, category, urdf, mesh_path, keypoint, grasps, radius)
 

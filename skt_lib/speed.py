@@ -91,7 +91,8 @@ def sim_bench(params, root: Path, per_level: int, run_items) -> dict:
     ``sim_bench_setup_failures_excluded`` counts them."""
     p = params.sim_eval
     supports, objects, _ = load_test_set(root, params.clustering.T, params.common.seed,
-                                         p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg)
+                                         p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg,
+                                         grasp_sphere=p.grasp_sphere_directions)
     chosen = [s for lv in LEVELS for s in [s for s in supports if s.difficulty == lv][:per_level]]
     models = load_models(root, SIM_BENCH_METHODS, params.clustering.T)
     settings = trial_settings(p, params.contact_sim)

@@ -60,7 +60,8 @@ def main(argv=None) -> int:
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
     T = params.clustering.T
     supports, objects, missing = load_test_set(root, T, params.common.seed, p.grasp_pitch_deg,
-                                                p.grasp_rolls_deg, p.grasp_yaws_deg)
+                                                p.grasp_rolls_deg, p.grasp_yaws_deg,
+                                                grasp_sphere=p.grasp_sphere_directions)
     if not supports or not objects:
         raise DataError(f"{root}: no test supports with a ground-truth SKT or no test objects")
     models = load_models(root, p.methods, T)

@@ -35,7 +35,7 @@ TINY = {
                  "n_proposals": 3, "omnihang_max_checks": 20000,
                  "robot_base_m": [0.15, 0.0, 0.3], "linear_damping": 0.04, "angular_damping": 0.04,
                  "settle_linear_damping": 1.0, "settle_angular_damping": 5.0, "grasp_pitch_deg": [45.0, 30.0, 60.0],
-                 "grasp_rolls_deg": [0.0, 180.0], "grasp_yaws_deg": [0.0], "setup_clearance_m": 0.002, "setup_fallbacks": 3, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,
+                 "grasp_rolls_deg": [0.0, 180.0], "grasp_yaws_deg": [0.0], "grasp_sphere_directions": 4, "setup_clearance_m": 0.002, "setup_fallbacks": 3, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,
                  "track_tol_m": 0.02, "ik_tol_m": 0.002, "ik_tol_rad": 0.02, "max_joint_step_rad": 0.2,
                  "ik_restarts": 4, "grasp_force_n": 60.0, "retreat_m": 0.08, "retreat_steps": 60,
                  "kpam_pre_hang_m": [0.1, 0.0, 0.0], "kpam_lift_m": 0.01,

@@ -87,7 +87,8 @@ def evaluate_views(args, params, predictor) -> list[dict]:
     supports, objects, _ = load_test_set(args.data_root, params.clustering.T, seed,
                                          params.sim_eval.grasp_pitch_deg,
                                          params.sim_eval.grasp_rolls_deg,
-                                         params.sim_eval.grasp_yaws_deg, *SPLITS[args.split])
+                                         params.sim_eval.grasp_yaws_deg, *SPLITS[args.split],
+                                         grasp_sphere=params.sim_eval.grasp_sphere_directions)
     k = Intrinsics(p.width, p.height, p.fov_deg)
     views = []
     for s in tqdm(supports, desc="views", unit="support", dynamic_ncols=True):

@@ -82,15 +82,21 @@ def main(argv=None) -> int:
     ap.add_argument("--robot-base", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                     help="stand the Panda's base here (world, m) instead of at "
                          "sim_eval.robot_base_m")
+    ap.add_argument("--grasp-sphere", type=int, default=None, metavar="N",
+                    help="try grasps from N sphere directions after the grid instead of "
+                         "sim_eval.grasp_sphere_directions")
     ap.add_argument("--out", default=Path("data/val_sim/val_sim.json"), type=Path)
     args = ap.parse_args(argv)
     params = load_params(args.params)
     p, T, seed = params.sim_eval, params.clustering.T, params.common.seed
     if args.robot_base is not None:
         p = p.model_copy(update={"robot_base_m": tuple(args.robot_base)})
+    if args.grasp_sphere is not None:
+        p = p.model_copy(update={"grasp_sphere_directions": args.grasp_sphere})
     supports, objects, missing = load_test_set(args.data_root, T, seed, p.grasp_pitch_deg,
                                                 p.grasp_rolls_deg, p.grasp_yaws_deg,
-                                                support_split="val", object_split="train")
+                                                support_split="val", object_split="train",
+                                                grasp_sphere=p.grasp_sphere_directions)
     if not supports or not objects:
         print(f"ERROR: {args.data_root}: no validation supports with an SKT or no training "
               "objects", file=sys.stderr)
@@ -130,6 +136,7 @@ def main(argv=None) -> int:
            "models": {name: str(d) for name, d in args.model}, "hang_taper": args.hang_taper,
            "check_families": args.check_families, "setup_fallbacks": n_fallbacks,
            "robot_base_m": list(p.robot_base_m),
+           "grasp_sphere_directions": p.grasp_sphere_directions,
            "methods": {m: {"success": table[m], "success_ci95": ci[m],
                            "failures_by_reason": {r: int((g["failure_reason"] == r).sum())
                                                   for r in REASONS}}

@@ -29,6 +29,8 @@ class SimEvalParams(Section):
         min_length=1, description="Grasp candidates: roll of the hand about its approach axis, degrees (inner loop of the order).")
     grasp_yaws_deg: tuple[float, ...] = Field(
         min_length=1, description="Grasp candidates: the approach turned about keypoint +z from keypoint +x, degrees (90: from the side; outer loop of the order).")
+    grasp_sphere_directions: int = Field(
+        ge=0, le=200, description="Grasp candidates tried after the yaw/pitch/roll grid: approaches from this many directions spread over the whole sphere (from below and above too), each with every roll; 0: the grid only.")
     setup_clearance_m: float = Field(
         ge=0.0, le=0.02, description="Set-up: least robot–support, robot–wall and robot–object distance at the start pose, m.")
     setup_fallbacks: int = Field(

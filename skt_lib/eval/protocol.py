@@ -33,13 +33,14 @@ from skt_lib.sim.grasp import grasp_candidates
 
 
 def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_deg=(0.0,),
-                  grasp_yaws_deg=(0.0,), support_split: str = "test", object_split: str = "test"
-                  ) -> tuple[list[TestSupport], list[TestObject], list[str]]:
+                  grasp_yaws_deg=(0.0,), support_split: str = "test", object_split: str = "test",
+                  grasp_sphere: int = 0) -> tuple[list[TestSupport], list[TestObject], list[str]]:
     """(test supports with a ground-truth SKT, test objects, ids of test supports without).
 
     Each object carries its grasp candidates (:func:`skt_lib.sim.grasp.grasp_candidates`)
     for every yaw of ``grasp_yaws_deg`` × pitch of ``grasp_pitch_deg`` × roll of
-    ``grasp_rolls_deg`` (degrees; pass ``sim_eval``'s), in that order. ``support_split`` /
+    ``grasp_rolls_deg`` (degrees; pass ``sim_eval``'s), in that order, then ``grasp_sphere``
+    directions × the rolls (``sim_eval.grasp_sphere_directions``). ``support_split`` /
     ``object_split``: the splits to take them from (Table I: both ``test``; validation in
     simulation, :mod:`tools.val_sim`: ``val`` supports with ``train`` objects)."""
     pitches = (grasp_pitch_deg,) if np.isscalar(grasp_pitch_deg) else tuple(grasp_pitch_deg)
@@ -71,7 +72,8 @@ def load_test_set(root: Path, T: int, seed: int, grasp_pitch_deg, grasp_rolls_de
         (mesh,) = read_obj(mg / o.mesh_path)
         objs.append(TestObject(o.object_id, o.category, str(mg / o.urdf_path), str(mg / o.mesh_path),
                                k, grasp_candidates(mesh.vertices, k, pitches, grasp_rolls_deg,
-                                                                 yaws_deg=grasp_yaws_deg),
+                                                                 yaws_deg=grasp_yaws_deg,
+                                                                 sphere=grasp_sphere),
                                float(np.linalg.norm(mesh.vertices - k[:3, 3], axis=1).max())))
     return test, objs, missing
 

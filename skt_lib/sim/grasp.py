@@ -7,7 +7,10 @@ motion into the hang; ±90: from the side; 180: from in front), pitched down by 
 (the hand comes from above), with the hand rolled by ``roll`` about that axis; the grasp
 target (between the fingertips) sits on the approach line through the lowest band, short of
 the object by a standoff, so that the hand behind it is clear of the object. Candidates
-come in a fixed order (yaw-major, then pitch, then roll, as listed in params);
+come in a fixed order (yaw-major, then pitch, then roll, as listed in params), then, tried
+last, approaches from directions spread over the whole sphere (from below and from straight
+above too: where a curl turns the object by more than a right angle, the one approach that
+stays within the arm's reach may be one the pitches never give);
 :func:`choose_grasp` takes the first one for which the set-up IK finds a joint path along
 the whole executed path, with the arm clear of the support and the wall along it and clear
 of the object at the start.
@@ -72,15 +75,54 @@ def grasp_in_keypoint(vertices: np.ndarray, keypoint: np.ndarray, pitch_deg: flo
     lowest ``band_m`` of the object, ``standoff_m`` before the first object point within
     ``hand_radius_m`` of that line, so the hand behind it is clear of the object. Roll 0 keeps
     the hand's y axis along keypoint −y turned by the yaw."""
-    v = transform_points(invert(keypoint), np.asarray(vertices, float))
-    centre = v[v[:, 2] <= v[:, 2].min() + band_m].mean(axis=0)
     p, r, y = np.radians(pitch_deg), np.radians(roll_deg), np.radians(yaw_deg)
     pitched = np.array([[np.sin(p), 0.0, np.cos(p)], [0.0, -1.0, 0.0],
                         [np.cos(p), 0.0, -np.sin(p)]])
-    rolled = np.array([[np.cos(r), -np.sin(r), 0.0], [np.sin(r), np.cos(r), 0.0], [0.0, 0.0, 1.0]])
     yawed = np.array([[np.cos(y), -np.sin(y), 0.0], [np.sin(y), np.cos(y), 0.0], [0.0, 0.0, 1.0]])
-    rot = yawed @ pitched @ rolled
-    d = rot[:, 2]  # the approach
+    return _placed(vertices, keypoint, yawed @ pitched @ _about_z(r), band_m, standoff_m,
+                   hand_radius_m)
+
+
+def grasp_along(vertices: np.ndarray, keypoint: np.ndarray, approach: np.ndarray,
+                roll_deg: float = 0.0, band_m: float = 0.02, standoff_m: float = 0.01,
+                hand_radius_m: float = HAND_RADIUS_M) -> np.ndarray:
+    """Grasp target pose (4×4) in the keypoint frame whose approach (hand +z) is the unit
+    vector ``approach`` (3,), keypoint frame, in any direction — from below and from straight
+    above too, which :func:`grasp_in_keypoint`'s pitches (0 to 90° down) do not give. Roll 0
+    puts the hand's x axis along keypoint +z × approach (along +z × keypoint +x when the
+    approach is within 25° of ±z); placed as :func:`grasp_in_keypoint` places its target."""
+    d = np.asarray(approach, float)
+    d = d / np.linalg.norm(d)
+    ref = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(ref, d)
+    x /= np.linalg.norm(x)
+    rot = np.stack([x, np.cross(d, x), d], axis=1)
+    return _placed(vertices, keypoint, rot @ _about_z(np.radians(roll_deg)), band_m, standoff_m,
+                   hand_radius_m)
+
+
+def sphere_directions(n: int) -> np.ndarray:
+    """``n`` unit vectors (n, 3) spread evenly over the sphere (a Fibonacci lattice, from +z
+    down to −z): the same list every time."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = np.sqrt(1.0 - z * z)
+    a = np.pi * (1.0 + np.sqrt(5.0)) * i
+    return np.stack([r * np.cos(a), r * np.sin(a), z], axis=1)
+
+
+def _about_z(angle: float) -> np.ndarray:
+    return np.array([[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0],
+                     [0.0, 0.0, 1.0]])
+
+
+def _placed(vertices, keypoint, rot, band_m, standoff_m, hand_radius_m) -> np.ndarray:
+    """The grasp with hand orientation ``rot`` (3×3, keypoint frame; column 2 the approach),
+    its target on the approach line through the centre of the object's lowest ``band_m``,
+    ``standoff_m`` before the first object point within ``hand_radius_m`` of that line."""
+    v = transform_points(invert(keypoint), np.asarray(vertices, float))
+    centre = v[v[:, 2] <= v[:, 2].min() + band_m].mean(axis=0)
+    d = rot[:, 2]
     along = (v - centre) @ d
     lateral = np.linalg.norm((v - centre) - along[:, None] * d, axis=1)
     t = np.eye(4)
@@ -91,13 +133,22 @@ def grasp_in_keypoint(vertices: np.ndarray, keypoint: np.ndarray, pitch_deg: flo
 
 def grasp_candidates(vertices: np.ndarray, keypoint: np.ndarray, pitches_deg, rolls_deg,
                      band_m: float = 0.02, standoff_m: float = 0.01,
-                     yaws_deg=(0.0,)) -> tuple[Grasp, ...]:
-    """Every (yaw, pitch, roll) grasp, yaw-major, then pitch, in the given orders."""
-    return tuple(
-        Grasp(f"pitch{p:g}_roll{r:g}" if y == 0 else f"yaw{y:g}_pitch{p:g}_roll{r:g}",
-              tuple(grasp_in_keypoint(vertices, keypoint, p, r, band_m, standoff_m, y)
-                    .ravel().tolist()))  # Python floats: every trial task pickles 288 of them
+                     yaws_deg=(0.0,), sphere: int = 0) -> tuple[Grasp, ...]:
+    """Every (yaw, pitch, roll) grasp, yaw-major, then pitch, in the given orders; then, with
+    ``sphere`` > 0, a grasp along each of :func:`sphere_directions` (``sphere``) for each
+    roll (direction-major): tried last, so a trial that a (yaw, pitch, roll) grasp serves runs
+    as it would without them."""
+    def grasp(label: str, t: np.ndarray) -> Grasp:
+        # Python floats: every trial task pickles a few hundred of them
+        return Grasp(label, tuple(t.ravel().tolist()))
+
+    grid = tuple(
+        grasp(f"pitch{p:g}_roll{r:g}" if y == 0 else f"yaw{y:g}_pitch{p:g}_roll{r:g}",
+              grasp_in_keypoint(vertices, keypoint, p, r, band_m, standoff_m, y))
         for y in yaws_deg for p in pitches_deg for r in rolls_deg)
+    return grid + tuple(
+        grasp(f"sphere{i}_roll{r:g}", grasp_along(vertices, keypoint, d, r, band_m, standoff_m))
+        for i, d in enumerate(sphere_directions(sphere)) for r in rolls_deg)
 
 
 def choose_grasp(world: World, robot: Panda, path: np.ndarray, grasps: tuple[Grasp, ...],

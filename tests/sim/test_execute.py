@@ -9,7 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from skt_lib.geometry.se3 import pose_matrix, transform_points
 from skt_lib.geometry.skt import interpolate
-from skt_lib.sim.grasp import HAND_RADIUS_M, grasp_candidates, grasp_in_keypoint
+from skt_lib.sim.grasp import HAND_RADIUS_M, grasp_along, grasp_candidates, grasp_in_keypoint, \
+    sphere_directions
 from skt_lib.sim.hanging import check_hang, perturb
 from skt_lib.sim.robot import IKFailure, Panda
 from tests.sim.test_hanging import PERT, _ring_world, _settle_from
@@ -80,6 +81,51 @@ def test_grasp_candidates_come_yaw_major_then_pitch_in_the_given_order():
     c = grasp_candidates(verts, np.eye(4), (45.0,), (0.0,), yaws_deg=(0.0, 90.0, -90.0))
     assert [g.label for g in c] == ["pitch45_roll0", "yaw90_pitch45_roll0", "yaw-90_pitch45_roll0"]
     assert np.allclose(c[1].matrix(), grasp_in_keypoint(verts, np.eye(4), 45.0, 0.0, yaw_deg=90.0))
+
+
+@pytest.mark.parametrize("n", [1, 8, 32])
+def test_sphere_directions_are_unit_and_spread_over_the_whole_sphere(n):
+    d = sphere_directions(n)
+    assert d.shape == (n, 3) and np.allclose(np.linalg.norm(d, axis=1), 1.0)
+    if n >= 8:  # from below and from above, and no two alike
+        assert d[:, 2].max() > 0.8 and d[:, 2].min() < -0.8
+        gap = np.linalg.norm(d[:, None] - d[None], axis=2) + 9 * np.eye(n)
+        assert gap.min() > 0.5 * np.sqrt(4 * np.pi / n)
+    assert np.array_equal(d, sphere_directions(n))
+
+
+@pytest.mark.parametrize("approach", [(0, 0, 1), (0, 0, -1), (1, 0, 0), (0.3, -0.8, 0.5),
+                                      (-0.2, 0.1, -0.97)])
+@pytest.mark.parametrize("roll", [0.0, 90.0, -90.0])
+def test_grasp_along_approaches_along_the_given_direction_clear_of_the_object(approach, roll):
+    rng = np.random.default_rng(3)
+    verts = rng.uniform([-0.04, -0.03, -0.1], [0.04, 0.03, 0.02], size=(800, 3))
+    keypoint = pose_matrix([0.0, 0.01, 0.0], Rotation.from_euler("x", 20, degrees=True).as_quat())
+    g = grasp_along(verts, keypoint, approach, roll)
+    r = g[:3, :3]
+    assert np.allclose(r.T @ r, np.eye(3)) and np.linalg.det(r) == pytest.approx(1.0)
+    d = np.asarray(approach, float) / np.linalg.norm(approach)
+    assert np.allclose(r[:, 2], d)
+    # the roll turns the hand about the approach: 90° apart → x axes at right angles
+    x0 = grasp_along(verts, keypoint, approach, roll - 90.0)[:3, 0]
+    assert np.dot(r[:, 0], x0) == pytest.approx(0.0, abs=1e-12)
+    v = transform_points(np.linalg.inv(keypoint), verts)
+    along = (v - g[:3, 3]) @ d
+    lateral = np.linalg.norm((v - g[:3, 3]) - along[:, None] * d, axis=1)
+    assert along[lateral <= HAND_RADIUS_M].min() == pytest.approx(0.01)
+
+
+def test_sphere_grasps_come_after_the_grid_which_they_leave_as_it_was():
+    verts = np.random.default_rng(2).uniform(-0.05, 0.05, size=(200, 3))
+    grid = grasp_candidates(verts, np.eye(4), (45.0, 30.0), (0.0, 180.0), yaws_deg=(0.0, 90.0))
+    both = grasp_candidates(verts, np.eye(4), (45.0, 30.0), (0.0, 180.0), yaws_deg=(0.0, 90.0),
+                            sphere=3)
+    assert both[:len(grid)] == grid
+    assert [g.label for g in both[len(grid):]] == ["sphere0_roll0", "sphere0_roll180",
+                                                   "sphere1_roll0", "sphere1_roll180",
+                                                   "sphere2_roll0", "sphere2_roll180"]
+    assert np.allclose(both[-1].matrix(), grasp_along(verts, np.eye(4), sphere_directions(3)[2],
+                                                      180.0))
 
 
 def test_predicate_rejects_an_object_still_in_the_gripper(tmp_path):
