@@ -237,14 +237,20 @@ def _written(ws: Path, path: str) -> bool:
     return bool(git("status", "--porcelain", "--untracked-files=all", "--", path, cwd=ws).strip())
 
 
+def seed_segments(segments: list[dict]) -> list[dict]:
+    """The seed step's segments that made the current seeds: those since a pipeline segment
+    last ran a stage other than ``sim_eval`` (a rerun model stage makes earlier seeds stale;
+    ``sim_eval`` runs after them and merges them)."""
+    last = max((i for i, s in enumerate(segments)
+                if s["kind"] == "pipeline" and set(s["stages"]) - {"sim_eval"}), default=-1)
+    return [s for s in segments[last + 1:] if s["kind"] == "seeds"]
+
+
 def collect(ws: Path, dest: Path, commit: str) -> dict:
     """The workspace's reports, params, lock and run figures into ``dest`` (replaced whole)."""
     segments = json.loads((ws / "logs" / "paper-segments.json").read_text())
     totals = stage_totals(segments)
-    # the seed step's segments since the pipeline last ran a stage (that reran make them stale)
-    last = max((i for i, s in enumerate(segments) if s["kind"] == "pipeline" and s["stages"]),
-               default=-1)
-    seeds = [s for s in segments[last + 1:] if s["kind"] == "seeds"]
+    seeds = seed_segments(segments)
     run = {
         "commit": commit,
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
@@ -286,13 +292,25 @@ def summary(run: dict) -> str:
                      + ", ".join(f"`{c[:7]}`" for c in t["commits"]) + " |")
     lines.append(f"| **pipeline** | **{run['pipeline_wall_s'] / 60:.1f}** | | | | |")
     if run["seeds_wall_s"] is not None:
-        lines.append(f"| extra training seeds (`tools.seed_sweep`, then `sim_eval`) | "
+        lines.append(f"| extra training seeds (`tools.seed_sweep` segments) | "
                      f"{run['seeds_wall_s'] / 60:.1f} | | | | |")
     lines += ["", "Wall time is the stage's process tree from its first to its last sighting "
               "(polled every 0.5 s), summed over the segments (a killed and resumed stage has "
               "two); set-up (the environment) is not included. Wall time also counts whatever "
               "else the machine ran meanwhile; CPU time does not.", ""]
     return "\n".join(lines)
+
+
+def steps(dvc: str, py: str, until: str | None, seeds: int) -> list[tuple[list[str], str]]:
+    """The segments of a run, as ``(command, kind)``: ``dvc repro`` (up to ``until``); with
+    ``seeds`` > 1 the models first (every stage but ``sim_eval``), then the extra seeds
+    (``tools.seed_sweep``: it needs only those stages up to date), then ``sim_eval`` once,
+    which merges them — rather than ``sim_eval`` twice, before and after the seeds."""
+    if until or seeds <= 1:
+        return [([dvc, "repro", *([until] if until else [])], "pipeline")]
+    return [([dvc, "repro", *[s for s in STAGES if s != "sim_eval"]], "pipeline"),
+            ([py, "-m", "tools.seed_sweep", "--seeds", str(seeds)], "seeds"),
+            ([dvc, "repro"], "pipeline")]
 
 
 def main(argv=None) -> int:
@@ -317,20 +335,14 @@ def main(argv=None) -> int:
     dvc = str(ws / ".venv" / "bin" / "dvc")
     clear_stale_rwlock(ws)
     if not args.collect_only:
-        target = [args.until] if args.until else []
-        rc = run_segment(ws, commit, [dvc, "repro", *target], "pipeline", log)
-        if rc:
-            print(f"ERROR: dvc repro exited {rc} in {ws}; see {log}", file=sys.stderr)
-            return rc
+        py = str(ws / ".venv" / "bin" / "python")
+        for cmd, kind in steps(dvc, py, args.until, args.seeds):
+            if rc := run_segment(ws, commit, cmd, kind, log):
+                print(f"ERROR: {' '.join(cmd[1:])} exited {rc} in {ws}; see {log}",
+                      file=sys.stderr)
+                return rc
         if args.until:
             return 0
-        if args.seeds > 1:
-            py = str(ws / ".venv" / "bin" / "python")
-            for cmd in ([py, "-m", "tools.seed_sweep", "--seeds", str(args.seeds)],
-                        [dvc, "repro", "sim_eval"]):
-                if rc := run_segment(ws, commit, cmd, "seeds", log):
-                    print(f"ERROR: {' '.join(cmd)} exited {rc}; see {log}", file=sys.stderr)
-                    return rc
     if not up_to_date(ws):
         print(f"ERROR: {ws}: the pipeline is not up to date (dvc status); run make paper",
               file=sys.stderr)

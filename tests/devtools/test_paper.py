@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from tests.conftest import TINY, assert_same_tree
-from tools.paper import merge, set_overrides, stage_totals
+from tools.paper import STAGES, merge, seed_segments, set_overrides, stage_totals, steps
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
@@ -161,3 +161,23 @@ def test_stage_totals_count_a_stages_last_completed_run_across_commits():
     ran["stages"]["render_views"]["first_s"], ran["stages"]["rrt_skts"]["first_s"] = 5.0, 40.0
     totals = stage_totals([ran])
     assert "render_views" in totals and "rrt_skts" not in totals
+
+
+def test_seeds_are_made_before_the_one_sim_eval_that_merges_them():
+    assert steps("dvc", "py", None, 1) == [(["dvc", "repro"], "pipeline")]
+    assert steps("dvc", "py", "rrt_skts", 3) == [(["dvc", "repro", "rrt_skts"], "pipeline")]
+    (models, _), (sweep, kind), (last, _) = steps("dvc", "py", None, 3)
+    assert models[:2] == ["dvc", "repro"] and sorted(models[2:]) == sorted(
+        s for s in STAGES if s != "sim_eval")
+    assert sweep == ["py", "-m", "tools.seed_sweep", "--seeds", "3"] and kind == "seeds"
+    assert last == ["dvc", "repro"]
+
+    def seg(kind, *stages):
+        return {"kind": kind, "stages": {name: {} for name in stages}}
+    made = seg("seeds")
+    # the old order (sim_eval, the seeds, sim_eval again) and the new one count the seeds
+    assert seed_segments([seg("pipeline", "train", "sim_eval"), made, seg("seeds")]) == \
+        [made, seg("seeds")]
+    assert seed_segments([seg("pipeline", "train"), made, seg("pipeline", "sim_eval")]) == [made]
+    # a model stage rerun after them makes them stale
+    assert seed_segments([made, seg("pipeline", "train", "sim_eval")]) == []
