@@ -16,8 +16,9 @@ interrupted run resumes from it. Two stamps say what it was made from: ``models.
 (:func:`skt_lib.eval.seeds.models_key`: training's data, code and params) and
 ``inputs.sha256`` (:func:`skt_lib.eval.seeds.inputs_key`: everything the trials' outcomes
 depend on). When the first differs the scratch is wiped; when only the second does, the
-seed's models are kept and only its ``sim_eval`` runs again) and ``reports/seeds/seed_runs.json`` (every extra seed's
-per-pair outcomes with :func:`skt_lib.eval.seeds.inputs_key`; a ``sim_eval`` dependency).
+seed's models are kept and only its ``sim_eval`` runs again) and
+``reports/seeds/seed_runs.json`` (every extra seed's per-pair outcomes with
+:func:`skt_lib.eval.seeds.inputs_key`; a ``sim_eval`` dependency).
 ``make seeds`` then reruns ``sim_eval``, which merges the seeds into Table I and
 ``reports/sim_eval/metrics.json`` (``seeds.<method>.success_mean`` …). The pipeline must be
 up to date (``dvc status``) when this runs: the key is read from ``dvc.lock``.
