@@ -288,7 +288,7 @@ def paper_table(data: dict) -> str:
                  f"{sum(v['cpu_s'] for v in p['stages'].values()) / 60:.1f} | |")
     if p.get("seeds_wall_s"):
         lines += ["", "The seed step's segments since the models last changed (two more "
-                      "training seeds trained and evaluated; before 405747a, `sim_eval` rerun "
+                      "training seeds trained and evaluated; before 762892f, `sim_eval` rerun "
                       f"after them too): {p['seeds_wall_s'] / 60:.1f} min."]
     return "\n".join(lines)
 

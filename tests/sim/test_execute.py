@@ -106,6 +106,10 @@ def test_grasp_along_approaches_along_the_given_direction_clear_of_the_object(ap
     assert np.allclose(r.T @ r, np.eye(3)) and np.linalg.det(r) == pytest.approx(1.0)
     d = np.asarray(approach, float) / np.linalg.norm(approach)
     assert np.allclose(r[:, 2], d)
+    # roll 0: the hand's x axis along keypoint +z × approach (+x × approach near ±z)
+    ref = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x_roll0 = np.cross(ref, d) / np.linalg.norm(np.cross(ref, d))
+    assert np.dot(r[:, 0], x_roll0) == pytest.approx(np.cos(np.radians(roll)), abs=1e-12)
     # the roll turns the hand about the approach: 90° apart → x axes at right angles
     x0 = grasp_along(verts, keypoint, approach, roll - 90.0)[:3, 0]
     assert np.dot(r[:, 0], x0) == pytest.approx(0.0, abs=1e-12)
