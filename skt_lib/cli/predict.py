@@ -14,7 +14,7 @@ by the same farthest-point sampling and shuffle as every training view
 
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +48,7 @@ EXAMPLE = """example:
 
 @dataclass(frozen=True, eq=False)
 class Prediction:
-    skt: Skt
+    skt: Skt | None  # None: the cloud made ready, not predicted yet (model_cloud)
     points: np.ndarray  # (N, 3) the cloud the model saw, support frame, metres
     counts: dict  # cleaning: points in and removed per step
     warnings: tuple[str, ...] = ()  # the frame or the cloud may be off (wall_frame, cloud_checks)
@@ -78,24 +78,25 @@ def prepare_cloud(points: np.ndarray, n: int, units: str = "m", frame: np.ndarra
     return sample_to(cleaned.points, n, rng), {**cleaned.counts, "n_points": n}, warnings
 
 
-def predict_cloud(predictor: SktPredictor | FlowReadout, points: np.ndarray, units: str = "m",
-                  frame: np.ndarray | None = None, seed: int = 0, name: str = "points"
-                  ) -> Prediction:
-    cloud, counts, warnings = prepare_cloud(points, predictor.cfg.n_points, units, frame, seed,
-                                            name)
-    distinct, need = len(np.unique(cloud, axis=0)), predictor.cfg.centres[0]
-    if distinct < need:  # the network's first farthest-point sample needs that many
+def model_cloud(cfg, points: np.ndarray, units: str = "m", frame: np.ndarray | None = None,
+                seed: int = 0, name: str = "points") -> Prediction:
+    """:func:`prepare_cloud` for a model of config ``cfg`` (its ``n_points``; refused, as
+    :class:`InputError`, below the ``centres[0]`` distinct points its first farthest-point
+    sample needs): a :class:`Prediction` without its ``skt`` yet (None)."""
+    cloud, counts, warnings = prepare_cloud(points, cfg.n_points, units, frame, seed, name)
+    distinct, need = len(np.unique(cloud, axis=0)), cfg.centres[0]
+    if distinct < need:
         raise InputError(f"{name}: {distinct} distinct points left on the structure after "
                          f"cleaning, the model needs at least {need}")
-    return Prediction(predictor.predict(cloud), cloud, counts, tuple(warnings))
+    return Prediction(None, cloud, counts, tuple(warnings))
 
 
-def predict_camera(predictor: SktPredictor | FlowReadout, points: np.ndarray,
-                   up: np.ndarray | None, units: str = "m", seed: int = 0,
-                   name: str = "points") -> Prediction:
+def camera_cloud(cfg, points: np.ndarray, up: np.ndarray | None, units: str = "m",
+                 seed: int = 0, name: str = "points") -> Prediction:
     """A raw camera-frame cloud with the wall in view: the support frame found from it
     (:func:`~skt_lib.perception.wall_frame.support_frame`; ``up`` in the camera frame, or
-    ``None`` for a level camera), the wall removed, then as :func:`predict_cloud`."""
+    ``None`` for a level camera), the wall removed, then as :func:`model_cloud` (``skt`` None,
+    ``camera_to_support`` set)."""
     a = np.asarray(points, dtype=np.float64) * UNITS[units]
     finite = a[np.isfinite(a).all(axis=1)]
     if units == "mm" and len(finite):
@@ -104,9 +105,24 @@ def predict_camera(predictor: SktPredictor | FlowReadout, points: np.ndarray,
             raise InputError(f"{name}: median range {range_m * 1000:.3g} mm after conversion from "
                              "millimetres — was it in metres already? (drop --units mm)")
     wf = support_frame(a, up, name=name)
-    pred = predict_cloud(predictor, wf.points, "m", None, seed, name)
-    return Prediction(pred.skt, pred.points, {**pred.counts, "n_wall": wf.n_wall},
-                      wf.warnings + pred.warnings, wf.camera_to_support)
+    ready = model_cloud(cfg, wf.points, "m", None, seed, name)
+    return Prediction(None, ready.points, {**ready.counts, "n_wall": wf.n_wall},
+                      wf.warnings + ready.warnings, wf.camera_to_support)
+
+
+def predict_cloud(predictor: SktPredictor | FlowReadout, points: np.ndarray, units: str = "m",
+                  frame: np.ndarray | None = None, seed: int = 0, name: str = "points"
+                  ) -> Prediction:
+    ready = model_cloud(predictor.cfg, points, units, frame, seed, name)
+    return replace(ready, skt=predictor.predict(ready.points))
+
+
+def predict_camera(predictor: SktPredictor | FlowReadout, points: np.ndarray,
+                   up: np.ndarray | None, units: str = "m", seed: int = 0,
+                   name: str = "points") -> Prediction:
+    """:func:`camera_cloud`, then the model's SKT of it."""
+    ready = camera_cloud(predictor.cfg, points, up, units, seed, name)
+    return replace(ready, skt=predictor.predict(ready.points))
 
 
 def _waypoints(frames: np.ndarray) -> list[dict]:

@@ -1,0 +1,73 @@
+"""tools/camera_eval.py: every learned row on depth-camera views, judged against its own clean
+success on the same views; the default predictor's extra seeds only when current."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from skt_lib.eval.seeds import models_key
+from tools.camera_eval import DEFAULT_METHOD, main
+
+
+@pytest.fixture(scope="module")
+def camera_run(tiny_dataset, tmp_path_factory):
+    params, data, _ = tiny_dataset
+    root = tmp_path_factory.mktemp("camera")
+    (root / "params.yaml").write_text(params.read_text())
+    view = root / "data"  # the tiny data, plus make seeds' scratch of two extra seeds
+    view.mkdir()
+    for entry in data.iterdir():
+        (view / entry.name).symlink_to(entry)
+    for seed, stamp in ((8, models_key(root)), (9, "stale")):
+        d = view / "seed_sweep" / f"seed_{seed}" / "train_baselines" / DEFAULT_METHOD
+        shutil.copytree(data / "train_baselines" / DEFAULT_METHOD, d)
+        (d.parents[1] / "models.sha256").write_text(stamp)
+    rep = root / "reports"
+    code = main(["--params", str(root / "params.yaml"), "--data-root", str(view),
+                 "--reports-dir", str(rep), "--views", "1", "--severities", "0", "1",
+                 "--hang-severities", "0", "1", "--methods", "sctdn", DEFAULT_METHOD])
+    assert code == 0
+    return (json.loads((rep / "metrics.json").read_text()),
+            json.loads((rep / "outcomes.json").read_text()), rep)
+
+
+def test_every_row_runs_on_the_same_views_and_current_seeds_only(camera_run):
+    m, outcomes, rep = camera_run
+    one = f"{DEFAULT_METHOD}@1"
+    assert set(outcomes) == {"sctdn", one, DEFAULT_METHOD, f"{one} seed 8",
+                             f"{DEFAULT_METHOD} seed 8"}  # seed 9's stamp is not today's
+    for label in outcomes:
+        keys = {"0/true", "0/up", "1/true", "1/up"}
+        if label.startswith(DEFAULT_METHOD):  # the default predictor: every mode
+            keys |= {"0/assumed", "1/assumed", "1/level"}
+        assert set(outcomes[label]) == keys, label
+        views = {k: set(v) for k, v in outcomes[label].items()}
+        assert all(v == views["0/true"] for v in views.values()), label
+    for key, flags in outcomes[one].items():  # the best of N never loses a view the first hung
+        assert all(outcomes[DEFAULT_METHOD][key][v] for v, ok in flags.items() if ok)
+    # the same model again (a seed copy), the same latents and views: the same verdicts
+    assert outcomes[f"{one} seed 8"] == outcomes[one]
+    assert (rep / "report.md").read_text().count(f"`{one}`") >= 2
+    assert (rep / "frame_errors.png").stat().st_size > 0
+
+
+def test_rates_and_kept_ratios_come_from_the_outcomes(camera_run):
+    m, outcomes, _ = camera_run
+    for label, k in m["kept"].items():
+        rate = {key: np.mean(list(v.values())) for key, v in outcomes[label].items()}
+        assert m["hang"][label]["1/up"]["success"] == pytest.approx(rate["1/up"])
+        assert k["clean"] == pytest.approx(rate["0/true"])
+        if rate["0/true"] > 0:
+            assert k["all"] == pytest.approx(rate["1/up"] / rate["0/true"])
+        assert k["paired"]["difference"] == pytest.approx(rate["1/up"] - rate["0/true"])
+    s = m["seeds"][f"{DEFAULT_METHOD}@1"]
+    assert s["rows"] == [f"{DEFAULT_METHOD}@1", f"{DEFAULT_METHOD}@1 seed 8"]
+    assert s["mean"]["0/true"]["all"] == pytest.approx(m["kept"][f"{DEFAULT_METHOD}@1"]["clean"])
+
+
+def test_the_clean_reference_must_be_hung(capsys):
+    with pytest.raises(SystemExit):
+        main(["--hang-severities", "1"])
+    assert "must include 0" in capsys.readouterr().err
