@@ -16,6 +16,12 @@ md,png}``:
 - **the committed model** (``data/train``), per level on the validation views: the template
   aligned at the predicted contact and the deformed SKT, each against its nearest
   ground-truth SKT, and the size of the deformation itself (mean waypoint offset);
+- **a template retrieved per hook** by the committed encoder: the training support whose
+  deformation feature (the affordance-masked shape feature, mean over all its views) is
+  nearest by cosine to the view's, its SKT nearest to the predicted family's template,
+  aligned at the predicted contact; and, optimistically, the best of that support's SKTs
+  against the ground truth — whether the encoder's features could choose a closer template
+  than the family's (docs/pipeline.md, the lead it tests);
 - **a picture**: the Very Hard validation support whose gap is the median of its level, seen
   from the side (support x–z) and from above (x–y): its cloud, its ground-truth SKTs, the
   aligned template and the deformed SKT.
@@ -39,6 +45,7 @@ from skt_lib.io import read_table
 from skt_lib.labels.families import fit_families
 from skt_lib.learning.data import load_supports, normalise
 from skt_lib.learning.predictor import SktPredictor
+from skt_lib.learning.sctdn import backbone_features, masked_max_pool
 from skt_lib.schemas import SKTS, SUPPORTS
 from skt_lib.seeding import item_rng
 
@@ -88,12 +95,33 @@ def label_gaps(root: Path, T: int, k_values, seed: int, n_init: int, max_iter: i
 
 
 @torch.no_grad()
-def model_gaps(predictor: SktPredictor, val, views) -> tuple[dict, dict]:
+def shape_keys(model, points: np.ndarray) -> np.ndarray:
+    """``(V, C)``: the deformation's shape feature (affordance-masked max pool of the
+    encoder's point features, as ``Sctdn._deform``) of each view ``points (V, N, 3)``."""
+    xyz_n, _, _ = normalise(points.astype(np.float64))
+    _, feats = backbone_features(model, torch.as_tensor(xyz_n, dtype=torch.float32))
+    aff = torch.sigmoid(model.aff_head(feats)[:, 0])
+    return masked_max_pool(feats, aff, model.cfg.aff_threshold).double().numpy()
+
+
+def retrieve(keys: np.ndarray, query: np.ndarray) -> int:
+    """Index of the row of ``keys (S, C)`` nearest to ``query (C,)`` by cosine."""
+    a = keys / np.linalg.norm(keys, axis=1, keepdims=True)
+    return int(np.argmax(a @ (query / np.linalg.norm(query))))
+
+
+@torch.no_grad()
+def model_gaps(predictor: SktPredictor, val, views, train) -> tuple[dict, dict]:
     """Per level (and ``all``), medians over validation views (mm): the aligned template's
     and the deformed SKT's distance to the nearest ground-truth SKT (``template_mm``,
-    ``sctdn_mm``) and the deformation's size (``offset_mm``); and per support its template
-    gap with its SKTs (metres, support frame) for the picture."""
+    ``sctdn_mm``), the deformation's size (``offset_mm``), and the template retrieved from
+    the ``train`` supports (:func:`retrieve` on :func:`shape_keys`): the retrieved support's
+    SKT nearest to the predicted family's template (``retrieved_mm``) and the best of its
+    SKTs (``retrieved_best_mm``, optimistic: it looks at the ground truth); and per support
+    its template gap with its SKTs (metres, support frame) for the picture."""
     model, rows, shown = predictor.model.eval(), {}, {}
+    keys = np.stack([shape_keys(model, s.points).mean(0) for s in train])
+    lift = np.array([0.0, 0.0, model.cfg.release_lift_m])
     for s in val:
         for v in views:
             pts = s.points[int(v)].astype(np.float64)
@@ -103,13 +131,20 @@ def model_gaps(predictor: SktPredictor, val, views) -> tuple[dict, dict]:
             aligned = out["aligned"][0].double().numpy() * scale + c
             traj = out["trajectory"][0].double().numpy() * scale + c
             near = lambda p: 1000 * np.linalg.norm(s.skts - p, axis=-1).mean(-1).min()  # noqa: E731
-            r = (near(aligned), near(traj), 1000 * np.linalg.norm(traj - aligned, axis=-1).mean())
+            found = train[retrieve(keys, shape_keys(model, pts[None])[0])].skts
+            found = found - found[:, :1]  # relative to ξ_0, as a template
+            template = model.templates[out["logits"][0].argmax()].double().numpy()
+            placed = aligned[0] - template[0] + found  # at the predicted contact and lift
+            nearest = placed[np.argmin(np.linalg.norm(found - template, axis=-1).mean(-1))]
+            r = (near(aligned), near(traj), 1000 * np.linalg.norm(traj - aligned, axis=-1).mean(),
+                 near(nearest), min(near(q) for q in placed))
             for lv in (s.level, "all"):
                 rows.setdefault(lv, []).append(r)
             if int(v) == int(views[0]):
                 shown[s.support_id] = {"level": s.level, "template_mm": r[0], "points": pts,
                                        "skts": s.skts, "aligned": aligned, "trajectory": traj}
-    table = {lv: dict(zip(("template_mm", "sctdn_mm", "offset_mm"),
+    table = {lv: dict(zip(("template_mm", "sctdn_mm", "offset_mm", "retrieved_mm",
+                           "retrieved_best_mm"),
                           np.median(np.array(r), axis=0).tolist()), n_views=len(r))
              for lv, r in rows.items()}
     return table, shown
@@ -166,13 +201,18 @@ def markdown(d: dict) -> str:
                      + " |")
     lines += ["", "**The committed model**, validation views, medians (mm): the template "
               "aligned at the predicted contact and the deformed SKT against the nearest "
-              "ground-truth SKT, and how far the deformation moved the template:", "",
-              "| level | views | template | SCTDN | deformation |", "|---|---|---|---|---|"]
+              "ground-truth SKT, how far the deformation moved the template, and a template "
+              "retrieved per hook from the training supports by the encoder's shape feature "
+              "(the retrieved support's SKT nearest to the predicted family's template, at the "
+              "predicted contact; and the best of its SKTs, which looks at the ground truth):",
+              "", "| level | views | template | SCTDN | deformation | retrieved | retrieved, "
+              "best of its SKTs (optimistic) |", "|---|---|---|---|---|---|---|"]
     for lv in (*LEVELS, "all"):
         if lv in d["model"]:
             r = d["model"][lv]
             lines.append(f"| {lv} | {r['n_views']} | {r['template_mm']:.1f} | "
-                         f"{r['sctdn_mm']:.1f} | {r['offset_mm']:.1f} |")
+                         f"{r['sctdn_mm']:.1f} | {r['offset_mm']:.1f} | "
+                         f"{r['retrieved_mm']:.1f} | {r['retrieved_best_mm']:.1f} |")
     lines += ["", f"![{d['picture']}](template_reach.png)", "",
               f"`{d['picture']}` (the validation support of median template gap on the "
               "hardest level, its first validation view): the cloud, its ground-truth SKTs, the "
@@ -191,9 +231,11 @@ def main(argv=None) -> int:
     pc, seed = params.clustering, params.common.seed
     d = {"k": pc.k, "labels": label_gaps(args.data_root, pc.T, (pc.k, *OTHER_K), seed,
                                           pc.n_init, pc.max_iter)}
-    val = [s for s in load_supports(args.data_root, pc.T) if s.split == "val"]
+    supports = load_supports(args.data_root, pc.T)
+    val = [s for s in supports if s.split == "val"]
     d["model"], shown = model_gaps(SktPredictor.load(args.data_root / "train"), val,
-                                   params.train.val_views)
+                                   params.train.val_views,
+                                   [s for s in supports if s.split == "train"])
     args.out.mkdir(parents=True, exist_ok=True)
     d["picture"] = picture(shown, args.out / "template_reach.png")
     (args.out / "template_reach.json").write_text(json.dumps(d, indent=2, sort_keys=True) + "\n")

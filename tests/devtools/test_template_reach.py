@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from tools.template_reach import gap_to_templates, main
+from tools.template_reach import gap_to_templates, main, retrieve
 
 
 def test_the_gap_is_the_nearest_skts_mean_waypoint_distance_relative_to_its_xi0():
@@ -20,6 +20,13 @@ def test_the_gap_is_the_nearest_skts_mean_waypoint_distance_relative_to_its_xi0(
     assert gaps[1] == pytest.approx(4.0 * 39 / 40)
 
 
+def test_retrieval_takes_the_key_of_nearest_direction_not_length():
+    keys = np.array([[1.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.6, 0.8, 0.0]])
+    assert retrieve(keys, np.array([0.0, 0.1, 0.0])) == 1  # far in length, same direction
+    assert retrieve(keys, np.array([5.0, 0.2, 0.0])) == 0
+    assert retrieve(keys, np.array([0.5, 0.9, 0.0])) == 2
+
+
 def test_the_report_on_the_tiny_pipeline(tiny_dataset, tmp_path):
     params, data, _ = tiny_dataset
     assert main(["--params", str(params), "--data-root", str(data), "--out", str(tmp_path)]) == 0
@@ -28,5 +35,7 @@ def test_the_report_on_the_tiny_pipeline(tiny_dataset, tmp_path):
     assert k in d["labels"] and sum(d["labels"][k]["family_sizes"]) > 0
     model = d["model"]["all"]
     assert model["n_views"] > 0 and model["template_mm"] > 0 and model["offset_mm"] >= 0
+    for r in d["model"].values():  # the best of the retrieved support's SKTs, view by view
+        assert 0 <= r["retrieved_best_mm"] <= r["retrieved_mm"]
     assert (tmp_path / "template_reach.png").stat().st_size > 10_000
     assert f"![{d['picture']}](template_reach.png)" in (tmp_path / "template_reach.md").read_text()
