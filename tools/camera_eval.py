@@ -72,8 +72,9 @@ SPLITS = {"test": ("test", "test"), "val": ("val", "train")}
 HEADLINE = 1.0
 #: ``skt predict``'s default model, as a method of Table I.
 DEFAULT_METHOD = Path(DEFAULT_MODEL).name
-#: Where ``make seeds`` keeps each extra seed's models (``seed_<s>/``, stamped).
-SEED_SWEEP = "seed_sweep"
+#: Where ``make seeds`` keeps each extra seed's models (``seed_<s>/``, stamped), and how an
+#: extra seed's row is labelled (``skt_flow@1 seed 20261124``).
+SEED_SWEEP, SEED_SEP = "seed_sweep", " seed "
 
 
 def frame_error(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
@@ -84,9 +85,10 @@ def frame_error(est: np.ndarray, true: np.ndarray) -> tuple[float, float]:
     return 1000 * float(np.linalg.norm(e[:3, 3])), float(angle)
 
 
-def hang_modes(method: str, severity: float) -> list[str]:
-    """The modes ``method``'s SKTs are hung from at ``severity``."""
-    if method != DEFAULT_METHOD:
+def hang_modes(label: str, severity: float) -> list[str]:
+    """The modes the row ``label``'s SKTs are hung from at ``severity``: every mode for the
+    default predictor (its committed model), :data:`EVERY_METHOD_MODES` for the others."""
+    if label != DEFAULT_METHOD:
         return list(EVERY_METHOD_MODES)
     return [m for m in MODES if m != "level" or severity == HEADLINE]
 
@@ -151,7 +153,7 @@ def _ready_modes(cfg, cam, modes, name: str) -> dict:
 
 
 def seed_models(root: Path, repo: Path, method: str) -> dict[str, Path]:
-    """``{"seed <s>": model folder}`` of ``method`` for every extra training seed ``make
+    """``{"<s>": model folder}`` of ``method`` for every extra training seed ``make
     seeds`` left under ``root/seed_sweep`` whose models are current (stamped with today's
     :func:`~skt_lib.eval.seeds.models_key`); stale ones are named on stderr and left out."""
     out, key = {}, models_key(repo)
@@ -164,7 +166,7 @@ def seed_models(root: Path, repo: Path, method: str) -> dict[str, Path]:
             print(f"camera_eval: {d} is stale (its models are not of the committed data and "
                   "code); run make seeds", file=sys.stderr)
             continue
-        out[f"seed {d.name.removeprefix('seed_')}"] = folder
+        out[d.name.removeprefix("seed_")] = folder
     return out
 
 
@@ -179,18 +181,19 @@ def predict_views(views, params, models: dict, n_fb: int) -> list[dict]:
             if not v["hung"]:
                 continue
             s = v["support"]
-            for mode in hang_modes(method, v["severity"]):
+            for mode in hang_modes(label, v["severity"]):
                 if mode not in v["ready"]:
                     continue
                 cloud, est = v["ready"][mode]
                 made = method_for(method, s.support_id, None, params, loaded)
                 skts = made.propose(cloud) if hasattr(made, "propose") else [made.predict(cloud)]
                 to_true = v["pose"] @ invert(est)  # what a robot given that frame executes
+                fallbacks = () if len(skts) > 1 else skts[0].fallbacks[:n_fb]  # as sim_eval
                 cases.append({
                     "label": label, "method": method, "view_index": i, "mode": mode,
-                    "proposals": [transform_points(to_true, k.positions) for k in skts],
-                    "fallbacks": () if len(skts) > 1 else tuple(
-                        transform_points(to_true, f) for f in skts[0].fallbacks[:n_fb])})
+                    "proposals": [transform_points(to_true, k.positions)  # a seed: @1 only
+                                  for k in (skts[:1] if SEED_SEP in label else skts)],
+                    "fallbacks": tuple(transform_points(to_true, f) for f in fallbacks)})
     return cases
 
 
@@ -229,7 +232,7 @@ def run_hangs(views, cases, params) -> pd.DataFrame:
         if v["hung"]:
             rows += [_row(label, method, v, mode, False, False, "refused")
                      for label, method in labels.items() for mode in v["refused"]
-                     if mode in hang_modes(method, v["severity"])]
+                     if mode in hang_modes(label, v["severity"])]
     return pd.DataFrame(rows)
 
 
@@ -247,12 +250,13 @@ def row_tables(trials: pd.DataFrame) -> dict[str, pd.DataFrame]:
     Columns as ``run_hangs``' with ``success`` the row's verdict."""
     out = {}
     for label, g in trials.groupby("label", sort=False):
-        if g["method"].iloc[0] in PROPOSING:
-            base, _, seed = label.partition(" ")
-            out[f"{base}{SINGLE}{' ' + seed if seed else ''}"] = g
-            out[label] = g.assign(success=g["success_any"])
-        else:
+        if g["method"].iloc[0] not in PROPOSING:
             out[label] = g
+            continue
+        base, sep, seed = label.partition(SEED_SEP)
+        out[f"{base}{SINGLE}{sep}{seed}"] = g
+        if not sep:  # an extra seed runs its first proposal only
+            out[label] = g.assign(success=g["success_any"])
     return out
 
 
@@ -285,7 +289,7 @@ def main(argv=None) -> int:
     if DEFAULT_METHOD in args.methods and not args.no_seeds:
         for label, folder in seed_models(args.data_root, args.params.resolve().parent,
                                          DEFAULT_METHOD).items():
-            models[f"{DEFAULT_METHOD} {label}"] = (
+            models[f"{DEFAULT_METHOD}{SEED_SEP}{label}"] = (
                 DEFAULT_METHOD, load_models(folder.parents[1], [DEFAULT_METHOD], T))
     cfgs = [c.cfg for _, loaded in models.values() for c in loaded.values()]
     if len({(c.n_points, tuple(c.centres)) for c in cfgs}) != 1:

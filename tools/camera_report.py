@@ -11,7 +11,9 @@ from skt_lib.config import LEVELS
 from skt_lib.eval.methods import PROPOSING
 from skt_lib.eval.protocol import SINGLE
 from skt_lib.stats import bootstrap_mean_interval, paired_comparison, wilson_interval
-from tools.camera_eval import DEFAULT_METHOD, FRAME_TOL_DEG, FRAME_TOL_MM, HEADLINE, MODES
+from tools.camera_eval import (
+    DEFAULT_METHOD, FRAME_TOL_DEG, FRAME_TOL_MM, HEADLINE, MODES, SEED_SEP,
+)
 from viz.report import Report
 
 #: Where a row is judged: what ``skt predict --camera --up`` gives at the headline severity,
@@ -20,7 +22,6 @@ CLEAN, CAMERA = "0/true", f"{HEADLINE:g}/up"
 #: The issue's bars: kept × clean at the headline severity on every level; the default
 #: predictor's at severity 2 on All.
 KEPT_MIN, KEPT_MIN_SEVERE, SEVERE = 0.9, 0.75, "2/up"
-SEED_SEP = " seed "
 
 
 def default_row() -> str:
