@@ -127,9 +127,10 @@ val-sim: $(STAMP)
 
 camera: $(STAMP)
 	@# skt predict --camera on depth-camera views of the test supports (the wall in view, the
-	@# sensor model at its default severity): support-frame errors against the true camera
-	@# pose, and SCTDN's SKT hung in simulation from the estimated and the true frame, into
-	@# reports/camera/; needs the artifacts of `make repro` (about 5 min on 2 cores)
+	@# sensor model at severities 0-4): support-frame errors against the true camera pose, and
+	@# every learned row of Table I hung in simulation from the estimated and the true frame,
+	@# each against its own clean success (the default predictor over make seeds' seeds when
+	@# current), into reports/camera/; needs the artifacts of `make repro`
 	$(BIN)/python -m tools.camera_eval
 
 train-diagnostics: $(STAMP)

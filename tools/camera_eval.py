@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import torch
 from tqdm import tqdm
 
 from skt_lib.cli.predict import DEFAULT_MODEL, camera_cloud, model_cloud
@@ -284,6 +285,8 @@ def main(argv=None) -> int:
         ap.error("--hang-severities: must include 0 (the clean reference) and be among "
                  "--severities")
     params = load_params(args.params)
+    # one thread: the same SKTs on any machine, and no spinning threads beside the trials' pool
+    torch.set_num_threads(1)
     T = params.clustering.T
     models = {m: (m, load_models(args.data_root, [m], T)) for m in args.methods}
     if DEFAULT_METHOD in args.methods and not args.no_seeds:
