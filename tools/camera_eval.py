@@ -256,7 +256,7 @@ def row_tables(trials: pd.DataFrame) -> dict[str, pd.DataFrame]:
             continue
         base, sep, seed = label.partition(SEED_SEP)
         out[f"{base}{SINGLE}{sep}{seed}"] = g
-        if not sep:  # an extra seed runs its first proposal only
+        if not sep:  # no best-of-N row for an extra seed: it runs its first proposal only
             out[label] = g.assign(success=g["success_any"])
     return out
 
