@@ -106,3 +106,39 @@ def test_each_mode_feeds_the_models_what_skt_predict_would(tiny_dataset):
         assert np.array_equal(got["ready"][mode][0], want.points), mode
         assert np.array_equal(got["ready"][mode][1], frame), mode
     assert not np.allclose(cam.assumed, cam.pose)  # severity 1: the assumed pose is off
+
+
+def test_rows_and_kept_ratios_on_known_verdicts():
+    import pandas as pd
+
+    from tools.camera_eval import row_tables
+    from tools.camera_report import _kept, _over_seeds
+
+    def rows(label, method, first, anyone):  # 4 views: 2 easy, 2 hard; clean and 1/up
+        out = []
+        for key, f, a in (("0/true", first[:4], anyone[:4]), ("1/up", first[4:], anyone[4:])):
+            sev, mode = key.split("/")
+            for i in range(4):
+                out.append({"label": label, "method": method, "support_id": f"s{i // 2}",
+                            "difficulty": "easy" if i < 2 else "hard", "object_id": "o",
+                            "view": i, "severity": float(sev), "mode": mode,
+                            "success": f[i], "success_any": a[i], "failure_reason": ""})
+        return out
+
+    t = pd.DataFrame(rows("skt_flow", "skt_flow", [1, 1, 1, 0, 1, 0, 1, 0],
+                          [1, 1, 1, 1, 1, 1, 1, 1])
+                     + rows("skt_flow seed 5", "skt_flow", [1, 0, 1, 0, 1, 0, 0, 0],
+                            [1, 1, 1, 1, 1, 1, 1, 1])
+                     + rows("sctdn", "sctdn", [1, 1, 0, 0, 1, 0, 0, 0], [0] * 8))
+    t[["success", "success_any"]] = t[["success", "success_any"]].astype(bool)
+    got = row_tables(t)
+    assert set(got) == {"skt_flow@1", "skt_flow", "skt_flow@1 seed 5", "sctdn"}
+    assert got["skt_flow"]["success"].all()  # best of N: any proposal
+    assert got["sctdn"]["success"].sum() == 3  # not a proposer: its own verdicts
+    k = _kept(got["skt_flow@1"], np.random.default_rng(0))
+    assert k["clean"] == 0.75 and k["camera"] == 0.5 and k["all"] == pytest.approx(0.5 / 0.75)
+    assert k["by_level"] == {"easy": 0.5, "hard": 1.0} and k["worst_level_name"] == "easy"
+    assert not k["meets"] and k["paired"]["difference"] == -0.25
+    s = _over_seeds(got)["skt_flow@1"]  # clean 0.75 and 0.5, camera 0.5 and 0.25
+    assert s["mean"]["0/true"]["all"] == 0.625 and s["kept"]["all"] == pytest.approx(0.6)
+    assert s["range"]["1/up"]["all"] == [0.25, 0.5]
