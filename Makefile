@@ -111,11 +111,13 @@ mutation: $(STAMP)
 seeds: $(STAMP)
 	@# the learned methods retrained with two more training seeds on the committed data and
 	@# evaluated on the same trials (reports/seeds/seed_runs.json), then sim_eval rerun to
-	@# merge them into Table I (reports/sim_eval: seeds.<method>.success_mean …); needs an
+	@# merge them into Table I (reports/sim_eval: seeds.<method>.success_mean …), and the default
+	@# predictor against vatmart_mod over the seeds (reports/seeds/compare.json); needs an
 	@# up-to-date `make repro` (about 25 min on 2 cores)
 	@$(BIN)/dvc status --quiet train train_baselines || { echo "make seeds: the models are not up to date (dvc status train train_baselines): run make repro first" >&2; exit 2; }
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python -m tools.seed_sweep
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro sim_eval
+	$(BIN)/python -m tools.seed_compare
 	$(BIN)/python -m tools.docs_results
 
 val-sim: $(STAMP)

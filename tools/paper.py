@@ -38,6 +38,7 @@ import yaml
 
 from skt_lib.io import write_json_atomic
 from tools.scaling import POLL_S, TreeMonitor
+from tools.seed_compare import DEFAULT_A, DEFAULT_B, compare_document, seed_pairs
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESET = ROOT / "params.paper.yaml"
@@ -265,6 +266,10 @@ def collect(ws: Path, dest: Path, commit: str) -> dict:
     shutil.copytree(ws / "reports", tmp, ignore=shutil.ignore_patterns(*NOT_COLLECTED))
     if not _written(ws, "reports/seeds"):  # the default's seeds, as the clone checked them out
         shutil.rmtree(tmp / "seeds", ignore_errors=True)
+    elif (tmp / "seeds" / "seed_runs.json").is_file():  # the default predictor against the rival
+        by_seed = seed_pairs(ws)
+        write_json_atomic(tmp / "seeds" / "compare.json",
+                          compare_document(by_seed, DEFAULT_A, DEFAULT_B))
     for name in ("params.yaml", "dvc.lock"):
         shutil.copy2(ws / name, tmp / name)
     (tmp / "run.json").write_text(json.dumps(run, indent=1) + "\n")  # stages in pipeline order
