@@ -14,10 +14,11 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
   NPZ write share), over the same sample of supports, one process;
 - ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded;
 - ``skt_flow_inference_ms_median``: skt_flow, batch 1, points in → ``sim_eval.n_proposals``
-  samples ordered by the cloud check (the first is the SKT it executes), model loaded;
+  samples ordered by the cloud check, the first moved clear of the points (the SKT it
+  executes), model loaded;
 - ``cli_predict_ms_median``: ``skt predict``'s prediction of a 1000-point view with its
-  default model (cleaning, sampling, skt_flow's 10 samples and the cloud check), model
-  loaded, process start excluded;
+  default model (cleaning, sampling, skt_flow's 10 samples, the cloud check and the move),
+  model loaded, process start excluded;
 - ``sim_trials_per_min``: sim_eval trials (Panda; the oracle's and SCTDN's SKTs, every test
   object) per minute of wall time on ``compute.n_workers`` workers, over ``per_level`` test
   supports per level, with the default executor; ``*_previous`` with the one before it

@@ -3,17 +3,20 @@ runs.
 
 The flow draws ``n_samples`` SKTs from noise and orders them by the cloud check (how deep the
 reference ring, carried along a sample, cuts into the observed points;
-:meth:`skt_lib.learning.flow.FlowPredictor.propose`); the first is the prediction, the others
-are its ``fallbacks``, clearest first. The noise comes from ``numpy``'s generator seeded with
-``seed`` on every call, so a cloud gives the same SKT each time. ``sim_eval`` draws its noise
-per support from the run's seed instead (:func:`skt_lib.seeding.item_rng`), so the CLI's SKT
-for a test view is another draw of the same model, not Table I's trial.
+:meth:`skt_lib.learning.flow.FlowPredictor.propose`); the first, moved clear of those points
+as ``sim_eval`` moves it (:func:`skt_lib.eval.clear_shift.shifted`), is the prediction, the
+others are its ``fallbacks``, clearest first and as drawn. The noise comes from ``numpy``'s
+generator seeded with ``seed`` on every call, so a cloud gives the same SKT each time.
+``sim_eval`` draws its noise per support from the run's seed instead
+(:func:`skt_lib.seeding.item_rng`), so the CLI's SKT for a test view is another draw of the
+same model, not Table I's trial.
 """
 
 from pathlib import Path
 
 import numpy as np
 
+from skt_lib.eval.clear_shift import shifted
 from skt_lib.learning.flow import FlowPredictor
 from skt_lib.learning.predictor import Skt
 
@@ -39,8 +42,10 @@ class FlowReadout:
         return cls(FlowPredictor.load(directory), n_samples, seed)
 
     def predict(self, points: np.ndarray) -> Skt:
-        """The clearest sample by the cloud check; the others, in that order, its fallbacks."""
+        """The clearest sample by the cloud check, moved clear of ``points``; the others, in
+        that order and as drawn, its fallbacks (shown in ``--rrd`` recordings)."""
         first, *others = self.flow.propose(points, np.random.default_rng(self.seed),
                                            self.n_samples)
+        first = shifted(first, points)
         return Skt(first.positions, first.frames, first.family, first.contact,
                    first.affordance, fallbacks=tuple(s.positions for s in others))

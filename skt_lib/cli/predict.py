@@ -257,7 +257,7 @@ def run(args) -> int:
     c = np.round(pred.skt.contact, 4).tolist()
     chosen = (f"family {pred.skt.family} (probability {pred.skt.family_probability:.2f})"
               if kind == "sctdn" else
-              f"the clearest of {predictor.n_samples} skt_flow samples")
+              f"the clearest of {predictor.n_samples} skt_flow samples, moved clear of the cloud")
     print(f"{args.output}: SKT of {record['T']} waypoints, {chosen}, contact {c} m "
           f"(cleaning kept {len(pred.points)} of {pred.counts['n_in']} points: "
           f"{pred.counts['non_finite']} non-finite, {pred.counts['outliers']} outliers, "

@@ -16,9 +16,10 @@
   ``n_proposals`` SKTs (the paper counts a trial as hung if any of them hangs), ``predict``
   the first of them (the honest single-sample rate).
 - ``skt_flow``: conditional flow-matching samples (``train_baselines``,
-  :mod:`skt_lib.learning.flow`) ordered by the cloud check on the observed points; ``predict``
-  gives the clearest, the one SKT its single-SKT row executes, ``propose`` all
-  ``n_proposals`` (its best-of-N row, as VAT-Mart's).
+  :mod:`skt_lib.learning.flow`) ordered by the cloud check on the observed points, each then
+  moved clear of them (:mod:`skt_lib.eval.clear_shift`); ``predict`` gives the clearest, the
+  one SKT its single-SKT row executes, ``propose`` all ``n_proposals`` (its best-of-N row, as
+  VAT-Mart's).
 - ``omnihang``: OMPL RRT-Connect to the ground-truth hanging pose (privileged), collision
   checked against the partial cloud only (:mod:`skt_lib.eval.omnihang`).
 
@@ -32,6 +33,7 @@ from typing import Protocol
 import numpy as np
 
 from skt_lib.errors import DataError
+from skt_lib.eval.clear_shift import shifted
 from skt_lib.geometry.skt import skt_frames
 from skt_lib.learning.flow import FlowPredictor
 from skt_lib.learning.predictor import Skt, SktPredictor
@@ -109,16 +111,19 @@ class Kpam:
 class Proposals:
     """A proposing model (VAT-Mart, skt_flow): ``propose`` returns ``n`` SKTs drawn with
     ``rng`` (pass a fresh per-support generator: the proposals are then a function of the
-    support); ``predict`` the first of them (skt_flow's: the clearest by the cloud check)."""
+    support); ``predict`` the first of them (skt_flow's: the clearest by the cloud check).
+    ``clear``: each SKT then moved clear of the cloud
+    (:func:`~skt_lib.eval.clear_shift.shifted`; skt_flow's read-out)."""
 
-    def __init__(self, predictor, rng: np.random.Generator, n: int):
-        self.predictor, self.n = predictor, n
+    def __init__(self, predictor, rng: np.random.Generator, n: int, clear: bool = False):
+        self.predictor, self.n, self.clear = predictor, n, clear
         self.state = rng.bit_generator.state
 
     def propose(self, cloud: np.ndarray) -> list[Skt]:
         rng = np.random.Generator(np.random.PCG64())
         rng.bit_generator.state = self.state  # the same draws on every call
-        return self.predictor.propose(cloud, rng, self.n)
+        skts = self.predictor.propose(cloud, rng, self.n)
+        return [shifted(k, cloud) for k in skts] if self.clear else skts
 
     def predict(self, cloud: np.ndarray) -> Skt:
         return self.propose(cloud)[0]
@@ -154,7 +159,7 @@ def make_method(name: str, predictor, gt_positions: np.ndarray, pre_hang: np.nda
         if name in PROPOSING:
             if rng is None:
                 raise ValueError(f"{name}: needs a generator for its latents")
-            return Proposals(predictor, rng, n_proposals)
+            return Proposals(predictor, rng, n_proposals, clear=name == "skt_flow")
         return Learned(predictor, deform=name != "template_only")
     if name == "omnihang":
         if omnihang is None:

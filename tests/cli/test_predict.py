@@ -49,8 +49,10 @@ def test_predict_ply_and_npy_give_the_models_skt(capsys, data_root, view, tmp_pa
 def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, data_root, view,
                                                                      tmp_path):
     """A train_baselines/skt_flow folder as --model: the SKT is the first of the flow's N
-    samples (noise seeded with --seed) as the cloud check orders them, the JSON says so and
-    carries no family; another seed draws another SKT; --samples sets N."""
+    samples (noise seeded with --seed) as the cloud check orders them, moved clear of the
+    cloud as sim_eval moves it; the JSON says so and carries no family; another seed draws
+    another SKT; --samples sets N."""
+    from skt_lib.eval.clear_shift import shifted
     from skt_lib.learning.flow import FlowPredictor
 
     np.save(tmp_path / "hook.npy", view)
@@ -65,7 +67,7 @@ def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, dat
     a, out = run("a", "--rrd", tmp_path / "a.rrd")
     flow = FlowPredictor.load(model)
     cloud, counts, _ = prepare_cloud(view, flow.cfg.n_points)
-    want = flow.propose(cloud, np.random.default_rng(0), 10)
+    want = [shifted(w, cloud) for w in flow.propose(cloud, np.random.default_rng(0), 10)]
     pos = np.array([w["position"] for w in a["waypoints"]])
     np.testing.assert_allclose(pos, want[0].positions, atol=1e-12)
     # the tiny model's samples lie close together, but not within the tolerance above: the
@@ -80,8 +82,8 @@ def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, dat
     assert b["waypoints"] == a["waypoints"]  # the same seed: the same SKT
     c, _ = run("c", "--samples", "3")
     want3 = flow.propose(cloud, np.random.default_rng(0), 3)
-    np.testing.assert_allclose([w["position"] for w in c["waypoints"]], want3[0].positions,
-                               atol=1e-12)
+    np.testing.assert_allclose([w["position"] for w in c["waypoints"]],
+                               shifted(want3[0], cloud).positions, atol=1e-12)
     d, _ = run("d", "--seed", "1")
     assert d["waypoints"] != a["waypoints"]
 

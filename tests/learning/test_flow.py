@@ -10,6 +10,7 @@ import torch
 
 from skt_lib.coverage import coverage, multimodality_coverage
 from skt_lib.errors import DataError
+from skt_lib.eval.clear_shift import shifted
 from skt_lib.eval.methods import make_method
 from skt_lib.geometry.objects import REFERENCE_RING_RADIUS_M
 from skt_lib.learning.cloud_check import ring_penetrations, ring_placements
@@ -122,7 +123,10 @@ def test_proposals_are_distinct_ordered_by_the_check_and_repeatable():
     assert not np.allclose(skts[0].positions, other[0].positions)
     method = make_method("skt_flow", pred, np.zeros((T, 3)), np.array([0.1, 0, 0]),
                          rng=np.random.default_rng(3), n_proposals=10)
-    assert np.array_equal(method.predict(pts).positions, skts[0].positions)
+    # sim_eval runs them moved clear of the points (skt_lib.eval.clear_shift), in that order
+    assert np.array_equal(method.predict(pts).positions, shifted(skts[0], pts).positions)
+    assert all(np.array_equal(a.positions, shifted(b, pts).positions)
+               for a, b in zip(method.propose(pts), skts))
     with pytest.raises(ValueError, match="at least 256"):
         pred.propose(pts[:100], np.random.default_rng(0), n=2)
     with pytest.raises(ValueError, match="n: need at least one"):
