@@ -29,8 +29,8 @@ import pandas as pd
 
 from skt_lib.config import LEVELS
 from skt_lib.config.params_file import load_params
-from skt_lib.eval.methods import FALLS_BACK_TO_STORED, MODEL_OF, PREDICTOR_OF, load_models, \
-    make_method
+from skt_lib.eval.methods import FALLS_BACK_TO_STORED, MODEL_OF, PREDICTOR_OF, Proposals, \
+    load_models, make_method
 from skt_lib.eval.protocol import load_test_set, per_pair, predict_all, success_table, \
     trial_settings
 from skt_lib.eval.rounds import run_rounds
@@ -85,6 +85,9 @@ def main(argv=None) -> int:
     ap.add_argument("--grasp-sphere", type=int, default=None, metavar="N",
                     help="try grasps from N sphere directions after the grid instead of "
                          "sim_eval.grasp_sphere_directions")
+    ap.add_argument("--no-clear", action="store_true",
+                    help="run skt_flow's samples as drawn, not moved clear of the cloud "
+                         "(skt_lib/eval/clear_shift.py): what the move gains")
     ap.add_argument("--out", default=Path("data/val_sim/val_sim.json"), type=Path)
     args = ap.parse_args(argv)
     params = load_params(args.params)
@@ -112,9 +115,12 @@ def main(argv=None) -> int:
     pre = np.asarray(p.kpam_pre_hang_m, float)
 
     def make(m: str, s):
-        return make_method(m, models.get(MODEL_OF.get(m)), s.gt, pre, p.kpam_lift_m,
+        made = make_method(m, models.get(MODEL_OF.get(m)), s.gt, pre, p.kpam_lift_m,
                            rng=item_rng(seed, f"val_sim/{m}", s.support_id),
                            n_proposals=p.n_proposals)
+        if args.no_clear and isinstance(made, Proposals):
+            made.clear = False
+        return made
 
     positions, _, _, fallbacks = predict_all(
         {m: (lambda s, m=m: make(m, s)) for m in args.methods}, supports)
@@ -135,6 +141,7 @@ def main(argv=None) -> int:
     out = {"supports": len(supports), "supports_without_skt": missing, "objects": len(objects),
            "models": {name: str(d) for name, d in args.model}, "hang_taper": args.hang_taper,
            "check_families": args.check_families, "setup_fallbacks": n_fallbacks,
+           "skt_flow_moved_clear": not args.no_clear,
            "robot_base_m": list(p.robot_base_m),
            "grasp_sphere_directions": p.grasp_sphere_directions,
            "methods": {m: {"success": table[m], "success_ci95": ci[m],

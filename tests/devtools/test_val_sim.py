@@ -81,3 +81,47 @@ def test_the_oracles_run_on_validation_and_the_robot_base_moves_the_panda(tiny_e
     assert ik["far"] > ik["here"]
     # ... and the floating hand, which has no base, is not moved
     assert far["outcomes"]["oracle_floating"] == here["outcomes"]["oracle_floating"]
+
+
+def test_no_clear_runs_skt_flows_samples_as_drawn(tiny_evaluated, monkeypatch):
+    """--no-clear hands the trials the flow's samples unmoved; by default they are moved clear
+    of the cloud (skt_lib.eval.clear_shift), as sim_eval runs them."""
+    import numpy as np
+
+    import tools.val_sim as val_sim
+    from skt_lib.eval.clear_shift import shifted
+    from skt_lib.eval.protocol import load_test_set
+    from skt_lib.config.params_file import load_params
+    from skt_lib.learning.flow import FlowPredictor
+    from skt_lib.seeding import item_rng
+
+    params_path, data, _, _ = tiny_evaluated
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def capture(methods, supports, objects, positions, *rest):
+        seen["positions"] = positions
+        raise Stop
+
+    monkeypatch.setattr(val_sim, "run_rounds", capture)
+    got = {}
+    for flag in ([], ["--no-clear"]):
+        with pytest.raises(Stop):
+            main(["--params", str(params_path), "--data-root", str(data), "--methods", "skt_flow",
+                  *flag])
+        got[bool(flag)] = seen["positions"]
+    params = load_params(params_path)
+    p = params.sim_eval
+    supports, _, _ = load_test_set(data, params.clustering.T, params.common.seed,
+                                   p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg,
+                                   support_split="val", object_split="train",
+                                   grasp_sphere=p.grasp_sphere_directions)
+    flow = FlowPredictor.load(data / "train_baselines" / "skt_flow")
+    for s in supports:
+        rng = item_rng(params.common.seed, "val_sim/skt_flow", s.support_id)
+        raw = flow.propose(s.cloud, rng, p.n_proposals)
+        drawn, moved = got[True]["skt_flow", s.support_id], got[False]["skt_flow", s.support_id]
+        assert all(np.array_equal(a, k.positions) for a, k in zip(drawn, raw))
+        assert all(np.array_equal(a, shifted(k, s.cloud).positions) for a, k in zip(moved, raw))
