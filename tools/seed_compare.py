@@ -86,7 +86,8 @@ def markdown(rows: list[dict]) -> str:
     for r in rows:
         lo, hi = (100 * x for x in r["diff_ci95"]) if r["diff_ci95"] else (float("nan"),) * 2
         disc = ", ".join(f"{c['n_a_only']}/{c['n_b_only']}" for c in r["per_seed"].values())
-        lines.append(f"| {r['level']} | {100 * r['rate_a_mean']:.1f} | {100 * r['rate_b_mean']:.1f} "
+        lines.append(f"| {r['level']} | {100 * r['rate_a_mean']:.1f} "
+                     f"| {100 * r['rate_b_mean']:.1f} "
                      f"| {100 * r['diff_mean']:+.1f} [{lo:+.1f}, {hi:+.1f}] "
                      f"| {r['holds_on_seeds']} / {len(r['per_seed'])} | {disc} |")
     return "\n".join(lines)
