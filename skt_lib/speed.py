@@ -135,5 +135,8 @@ def sim_bench(params, root: Path, per_level: int, run_items) -> dict:
         differ = [f"{tid}: {a} → {b}" for (tid, a), (_, b) in zip(ref, verdicts[executor])
                   if a != b]
         out[f"sim_verdict_agreement{name}"] = 1.0 - len(differ) / len(ref)
+        out[f"sim_success_agreement{name}"] = 1.0 - sum(
+            (a == "success") != (b == "success")
+            for (_, a), (_, b) in zip(ref, verdicts[executor])) / len(ref)
         out[f"sim_verdict_disagreements{name}"] = differ
     return out

@@ -24,7 +24,9 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
   supports per level, with the default executor; ``*_previous`` with the one before it
   (``fallen_exit``), ``*_reference`` with the reference executor, ``sim_speedup_vs_*`` the
   ratios; ``sim_verdict_agreement`` (``*_previous``) the share of the reference executor's
-  verdicts the default (previous) executor repeats (``sim_verdict_disagreements*``: the rest).
+  verdicts the default (previous) executor repeats (``sim_verdict_disagreements*``: the rest),
+  ``sim_success_agreement`` (``*_previous``) the share whose outcome alone (hung or not) it
+  repeats.
   Trials whose set-up finds no grasp are left out of all three
   (``sim_bench_setup_failures_excluded``; :func:`skt_lib.speed.sim_bench` says why);
 - ``import_dense_s_median``: ``skt import-support`` / ``import-object`` of the mesh zoo's

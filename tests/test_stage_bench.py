@@ -77,7 +77,8 @@ def test_sim_bench_leaves_out_trials_whose_set_up_found_no_grasp(tiny_dataset):
     """sim_bench on the tiny set with a recording runner: a trial the default executor could
     not set up (ik_failed, no grasp) is timed by no executor, every other trial by all three
     (the same trials, in the same order), and a reference verdict the default executor does
-    not repeat is reported as a disagreement."""
+    not repeat is reported as a disagreement, and one it repeats as a failure for another
+    reason disagrees on the reason only."""
     from collections import Counter
 
     from skt_lib import speed
@@ -97,6 +98,9 @@ def test_sim_bench_leaves_out_trials_whose_set_up_found_no_grasp(tiny_dataset):
             rows[1] |= {"failure_reason": "ik_failed"}  # a grasp, lost on the way: kept
         if desc.endswith("reference"):
             rows[-1] |= {"failure_reason": "dropped"}
+            rows[-2] |= {"failure_reason": "collided_before_hang"}
+        if desc.endswith("fallen_exit") or desc.endswith("rest_exit"):
+            rows[-2] |= {"failure_reason": "dropped"}  # a failure for another reason
         return [{"row": r} for r in rows], Counter(), []
 
     got = speed.sim_bench(load_params(params_path), data, 1, runner)
@@ -107,7 +111,10 @@ def test_sim_bench_leaves_out_trials_whose_set_up_found_no_grasp(tiny_dataset):
         assert ids == all_ids[1:] and set(executors) == {desc.rsplit(", ", 1)[1]}
     assert got["sim_bench_trials"] == len(all_ids) - 1
     assert got["sim_bench_setup_failures_excluded"] == 1
-    assert got["sim_bench_failures_reference"] == 1
-    assert got["sim_verdict_disagreements"] == [f"{all_ids[-1]}: dropped → success"]
-    assert got["sim_verdict_agreement"] == 1.0 - 1 / (len(all_ids) - 1)
+    assert got["sim_bench_failures_reference"] == 2
+    assert got["sim_verdict_disagreements"] == [
+        f"{all_ids[-2]}: collided_before_hang → dropped", f"{all_ids[-1]}: dropped → success"]
+    assert got["sim_verdict_agreement"] == 1.0 - 2 / (len(all_ids) - 1)
+    # the failure for another reason is still a failure: only the drop that hung disagrees
+    assert got["sim_success_agreement"] == 1.0 - 1 / (len(all_ids) - 1)
     assert set(got) <= set(BENCH_ROWS) | set(BENCH_SAMPLE)

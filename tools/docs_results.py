@@ -80,6 +80,9 @@ BENCH_ROWS = {
                                         "or success) the default executor and the reference "
                                         "agree on"),
     "sim_verdict_agreement_previous": ("{:.3f}", "the same for the previous executor"),
+    "sim_success_agreement": ("{:.3f}", "share of those trials whose outcome alone (hung or "
+                                        "not) the default executor and the reference agree on"),
+    "sim_success_agreement_previous": ("{:.3f}", "the same for the previous executor"),
     "import_dense_s_median": ("{:.1f} s", "`skt import-support` / `import-object` of a ≥ 250k-"
                                           "face mesh (the mesh zoo's dense cases, "
                                           "`skt_lib/cli/mesh_zoo.py`), process start included"),
