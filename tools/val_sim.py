@@ -61,6 +61,24 @@ def with_readout(predictor: SktPredictor, **changes) -> SktPredictor:
     return SktPredictor(model)
 
 
+def validation_set(root: Path, T: int, seed: int, p) -> tuple[list, list, list]:
+    """(validation supports, training objects, validation supports without an SKT) under
+    ``root``, with ``sim_eval``'s grasps (``p``: its params)."""
+    return load_test_set(root, T, seed, p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg,
+                         support_split="val", object_split="train",
+                         grasp_sphere=p.grasp_sphere_directions)
+
+
+def run_all(tasks: list, compute, label: str) -> list[dict]:
+    """:func:`~skt_lib.sim.execute.run_trial` of every task on the stages' runner, in order;
+    a crashed trial is an error here, not a failure."""
+    results, _, crashes = run_items(run_trial, tasks, compute, label)
+    if crashes:
+        raise RuntimeError(f"{len(crashes)} trials crashed, first: {crashes[0][0].trial_id}: "
+                           f"{crashes[0][1]}")
+    return results
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="tools/val_sim.py", description=__doc__.splitlines()[0])
     ap.add_argument("--params", default="params.yaml", type=Path)
@@ -96,10 +114,7 @@ def main(argv=None) -> int:
         p = p.model_copy(update={"robot_base_m": tuple(args.robot_base)})
     if args.grasp_sphere is not None:
         p = p.model_copy(update={"grasp_sphere_directions": args.grasp_sphere})
-    supports, objects, missing = load_test_set(args.data_root, T, seed, p.grasp_pitch_deg,
-                                                p.grasp_rolls_deg, p.grasp_yaws_deg,
-                                                support_split="val", object_split="train",
-                                                grasp_sphere=p.grasp_sphere_directions)
+    supports, objects, missing = validation_set(args.data_root, T, seed, p)
     if not supports or not objects:
         print(f"ERROR: {args.data_root}: no validation supports with an SKT or no training "
               "objects", file=sys.stderr)
@@ -127,15 +142,9 @@ def main(argv=None) -> int:
     n_fallbacks = p.setup_fallbacks if args.setup_fallbacks is None else args.setup_fallbacks
     fallbacks = {key: f[:n_fallbacks] for key, f in fallbacks.items()}
 
-    def run(tasks, label):
-        results, _, crashes = run_items(run_trial, tasks, params.compute, label)
-        if crashes:
-            raise RuntimeError(f"{len(crashes)} trials crashed, first: {crashes[0][0].trial_id}: "
-                               f"{crashes[0][1]}")
-        return results
-
     rows, _ = run_rounds(args.methods, supports, objects, positions,
-                         trial_settings(p, params.contact_sim), run, fallbacks)
+                         trial_settings(p, params.contact_sim),
+                         lambda tasks, label: run_all(tasks, params.compute, label), fallbacks)
     pairs = per_pair(pd.DataFrame(rows))
     table, ci = success_table(pairs), success_ci95(pairs, LEVELS)
     out = {"supports": len(supports), "supports_without_skt": missing, "objects": len(objects),

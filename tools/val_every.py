@@ -1,0 +1,155 @@
+"""Every proposal on validation (after ``make repro``): each of a proposing method's
+``sim_eval.n_proposals`` SKTs of a validation support hung with every training object (the
+pairs of ``tools/val_sim.py``), so that rules for *which* SKT to run can be scored offline
+on the same trials, and the best of N told from what a pick could reach.
+
+The rules (:data:`RULES`; each sees only the support's cloud and its proposals, never an
+outcome): ``first`` (what the method runs: skt_flow's clearest by the cloud check),
+``least_penetration`` (the least :func:`~skt_lib.learning.cloud_check.ring_penetrations` of
+the SKTs run, the first of equals), ``least_moved`` (the one the move clear of the cloud
+shifted least; only with the move), ``medoid`` (the least mean distance to the others,
+waypoint by waypoint). Beside them, bounds no rule can pass: ``random`` (a proposal drawn
+at random: the mean over the N) and ``best_of_n`` (any of the N hung).
+
+Writes a JSON (``--out``): per rule and bound the success per level; per rule against
+``first`` the pairs gained and lost, the supports up and down, and the support-bootstrap
+95 % interval of the difference (:func:`~skt_lib.stats.paired_support_interval`); each
+rule's picks, each support's penetrations, and every pair's N outcomes (``outcomes``:
+``{"<support_id>/<object_id>": [bool, …]}``). Nothing under the data root or ``reports/``
+changes. Costs N × ``tools/val_sim.py``'s trials of one method (skt_flow on the default
+data: 4,000 trials, about 25 minutes on 2 cores).
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from skt_lib.config import LEVELS
+from skt_lib.config.params_file import load_params
+from skt_lib.eval.clear_shift import shifted
+from skt_lib.eval.methods import PROPOSING, Proposals, load_models, make_method
+from skt_lib.eval.protocol import make_task, trial_settings
+from skt_lib.io import write_json_atomic
+from skt_lib.learning.cloud_check import ring_penetrations
+from skt_lib.seeding import item_rng
+from skt_lib.stats import paired_support_interval
+from tools.val_sim import run_all, validation_set
+
+RULES = ("first", "least_penetration", "least_moved", "medoid")
+BOUNDS = ("random", "best_of_n")
+
+
+def picks(drawn: list[np.ndarray], run: list[np.ndarray], cloud: np.ndarray) -> dict[str, int]:
+    """Which proposal each rule of :data:`RULES` runs, from the proposals as drawn and as
+    run (``(T, 3)`` each, the same order; the same arrays where nothing moves them) and the
+    support's ``cloud (N, 3)``; ``least_moved`` only where the proposals were moved."""
+    if not run or len(drawn) != len(run):
+        raise ValueError(f"drawn, run: need the same proposals, got {len(drawn)} and {len(run)}")
+    pen = ring_penetrations(run, cloud)
+    stack = np.stack(run)
+    spread = np.linalg.norm(stack[:, None] - stack[None], axis=-1).mean(-1).sum(1)
+    out = {"first": 0, "least_penetration": int(np.argmin(pen)), "medoid": int(np.argmin(spread))}
+    moved = [float(np.linalg.norm(r[0] - d[0])) for d, r in zip(drawn, run)]
+    if any(moved):
+        out["least_moved"] = int(np.argmin(moved))
+    return out
+
+
+def score(outcomes: dict[tuple[str, str], list[bool]], levels: dict[str, str],
+          chosen: dict[str, dict[str, int]], rng: np.random.Generator) -> dict:
+    """Success per level of every rule (``chosen[rule][support_id]``: the proposal it runs)
+    and bound, from ``outcomes[(support_id, object_id)]`` (one flag per proposal), and each
+    rule against ``first`` on the same pairs."""
+    keys = list(outcomes)
+    groups = np.array([s for s, _ in keys])
+    flags = np.array([outcomes[k] for k in keys], bool)
+
+    def by_level(values: np.ndarray) -> dict[str, float | None]:
+        out = {"all": float(values.mean())}
+        for lv in LEVELS:
+            at = np.array([levels[s] == lv for s in groups])
+            out[lv] = float(values[at].mean()) if at.any() else None
+        return out
+
+    values = {rule: flags[np.arange(len(keys)), [pick[s] for s in groups]]
+              for rule, pick in chosen.items()}
+    out = {name: {"success": by_level(v.astype(float))} for name, v in values.items()}
+    out["random"] = {"success": by_level(flags.mean(1))}
+    out["best_of_n"] = {"success": by_level(flags.any(1).astype(float))}
+    first = values["first"]
+    for rule, v in values.items():
+        if rule == "first":
+            continue
+        per = {s: (v[groups == s].mean(), first[groups == s].mean()) for s in dict.fromkeys(groups)}
+        ci = paired_support_interval(v, first, groups, rng)
+        out[rule]["vs_first"] = {"gained": int((v & ~first).sum()), "lost": int((first & ~v).sum()),
+                                 "supports_up": int(sum(a > b for a, b in per.values())),
+                                 "supports_down": int(sum(a < b for a, b in per.values())),
+                                 "difference_ci95": None if ci is None else list(ci)}
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="tools/val_every.py", description=__doc__.splitlines()[0])
+    ap.add_argument("--params", default="params.yaml", type=Path)
+    ap.add_argument("--data-root", default="data", type=Path)
+    ap.add_argument("--method", default="skt_flow", choices=PROPOSING)
+    ap.add_argument("--no-clear", action="store_true",
+                    help="skt_flow's samples as drawn, not moved clear of the cloud")
+    ap.add_argument("--out", default=Path("data/val_sim/every.json"), type=Path)
+    args = ap.parse_args(argv)
+    params = load_params(args.params)
+    p, T, seed = params.sim_eval, params.clustering.T, params.common.seed
+    supports, objects, missing = validation_set(args.data_root, T, seed, p)
+    if not supports or not objects:
+        print(f"ERROR: {args.data_root}: no validation supports with an SKT or no training "
+              "objects", file=sys.stderr)
+        return 2
+    model = load_models(args.data_root, [args.method], T).get(args.method)
+    pre = np.asarray(p.kpam_pre_hang_m, float)
+    settings = trial_settings(p, params.contact_sim)
+    chosen, pens, tasks = {r: {} for r in RULES}, {}, []
+    for s in supports:
+        # val_sim's generator: its first proposal and best of N are the same SKTs as here
+        method = make_method(args.method, model, s.gt, pre, p.kpam_lift_m,
+                             rng=item_rng(seed, f"val_sim/{args.method}", s.support_id),
+                             n_proposals=p.n_proposals)
+        assert isinstance(method, Proposals)
+        move, method.clear = method.clear and not args.no_clear, False
+        skts = method.propose(s.cloud)
+        drawn = [k.positions for k in skts]
+        run = [shifted(k, s.cloud).positions for k in skts] if move else drawn
+        for rule, i in picks(drawn, run, s.cloud).items():
+            chosen[rule][s.support_id] = i
+        pens[s.support_id] = (ring_penetrations(run, s.cloud) * 1e6).tolist()
+        tasks += [make_task(args.method, s, o, x, settings, proposal=i)
+                  for o in objects for i, x in enumerate(run)]
+    chosen = {r: c for r, c in chosen.items() if c}
+    rows = [x["row"] for x in run_all(tasks, params.compute, f"every proposal of {args.method}")]
+    outcomes = {(s.support_id, o.object_id): [False] * p.n_proposals
+                for s in supports for o in objects}
+    for row in rows:
+        outcomes[row["support_id"], row["object_id"]][row["proposal"]] = bool(row["success"])
+    levels = {s.support_id: s.difficulty for s in supports}
+    table = score(outcomes, levels, chosen, np.random.default_rng(seed))
+    out = {"method": args.method, "n_proposals": p.n_proposals, "supports": len(supports),
+           "supports_without_skt": missing, "objects": len(objects),
+           "moved_clear": "least_moved" in chosen, "rules": table, "picks": chosen,
+           "penetration_mm2": pens,
+           "outcomes": {f"{s}/{o}": v for (s, o), v in outcomes.items()}}
+    write_json_atomic(args.out, out)
+    for name, v in table.items():
+        line = "  ".join(f"{k} {100 * x:.1f}" for k, x in v["success"].items() if x is not None)
+        if "vs_first" in v:
+            c = v["vs_first"]
+            line += (f"   vs first: +{c['gained']} / −{c['lost']} pairs, supports "
+                     f"{c['supports_up']} up / {c['supports_down']} down")
+        print(f"{name:>18}: {line}")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
