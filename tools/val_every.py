@@ -41,19 +41,21 @@ RULES = ("first", "least_penetration", "least_moved", "medoid")
 BOUNDS = ("random", "best_of_n")
 
 
-def picks(drawn: list[np.ndarray], run: list[np.ndarray], cloud: np.ndarray) -> dict[str, int]:
+def picks(drawn: list[np.ndarray], run: list[np.ndarray], cloud: np.ndarray,
+          moved: bool) -> dict[str, int]:
     """Which proposal each rule of :data:`RULES` runs, from the proposals as drawn and as
-    run (``(T, 3)`` each, the same order; the same arrays where nothing moves them) and the
-    support's ``cloud (N, 3)``; ``least_moved`` only where the proposals were moved."""
+    run (``(T, 3)`` each, the same order) and the support's ``cloud (N, 3)``;
+    ``least_moved`` only where the method moves its proposals (``moved``: on every support,
+    those the move left where they were included)."""
     if not run or len(drawn) != len(run):
         raise ValueError(f"drawn, run: need the same proposals, got {len(drawn)} and {len(run)}")
     pen = ring_penetrations(run, cloud)
     stack = np.stack(run)
     spread = np.linalg.norm(stack[:, None] - stack[None], axis=-1).mean(-1).sum(1)
     out = {"first": 0, "least_penetration": int(np.argmin(pen)), "medoid": int(np.argmin(spread))}
-    moved = [float(np.linalg.norm(r[0] - d[0])) for d, r in zip(drawn, run)]
-    if any(moved):
-        out["least_moved"] = int(np.argmin(moved))
+    if moved:
+        shifts = [np.linalg.norm(r[0] - d[0]) for d, r in zip(drawn, run)]
+        out["least_moved"] = int(np.argmin(shifts))
     return out
 
 
@@ -121,12 +123,12 @@ def main(argv=None) -> int:
         skts = method.propose(s.cloud)
         drawn = [k.positions for k in skts]
         run = [shifted(k, s.cloud).positions for k in skts] if move else drawn
-        for rule, i in picks(drawn, run, s.cloud).items():
+        for rule, i in picks(drawn, run, s.cloud, move).items():
             chosen[rule][s.support_id] = i
         pens[s.support_id] = (ring_penetrations(run, s.cloud) * 1e6).tolist()
         tasks += [make_task(args.method, s, o, x, settings, proposal=i)
                   for o in objects for i, x in enumerate(run)]
-    chosen = {r: c for r, c in chosen.items() if c}
+    chosen = {r: c for r, c in chosen.items() if c}  # least_moved: only with the move
     rows = [x["row"] for x in run_all(tasks, params.compute, f"every proposal of {args.method}")]
     outcomes = {(s.support_id, o.object_id): [False] * p.n_proposals
                 for s in supports for o in objects}
@@ -136,7 +138,7 @@ def main(argv=None) -> int:
     table = score(outcomes, levels, chosen, np.random.default_rng(seed))
     out = {"method": args.method, "n_proposals": p.n_proposals, "supports": len(supports),
            "supports_without_skt": missing, "objects": len(objects),
-           "moved_clear": "least_moved" in chosen, "rules": table, "picks": chosen,
+           "moved_clear": move, "rules": table, "picks": chosen,
            "penetration_mm2": pens,
            "outcomes": {f"{s}/{o}": v for (s, o), v in outcomes.items()}}
     write_json_atomic(args.out, out)
