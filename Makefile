@@ -124,7 +124,8 @@ val-sim: $(STAMP)
 	@# the learned methods hang the training objects on the validation supports in
 	@# simulation (decisions on hang rates without the test set): data/val_sim/val_sim.json;
 	@# needs the artifacts of `make repro`. Other methods or models: ARGS='--methods sctdn
-	@# template_only --model sctdn=DIR'
+	@# template_only --model sctdn=DIR'. Every proposal of a proposing method, with pick rules
+	@# scored on the same trials: python -m tools.val_every (docs/cli.md)
 	$(BIN)/python -m tools.val_sim $(ARGS)
 
 camera: $(STAMP)
