@@ -99,7 +99,7 @@ def test_sim_bench_leaves_out_trials_whose_set_up_found_no_grasp(tiny_dataset):
         if desc.endswith("reference"):
             rows[-1] |= {"failure_reason": "dropped"}
             rows[-2] |= {"failure_reason": "collided_before_hang"}
-        if desc.endswith("fallen_exit") or desc.endswith("rest_exit"):
+        if desc.endswith(("fallen_exit", "rest_exit")):
             rows[-2] |= {"failure_reason": "dropped"}  # a failure for another reason
         return [{"row": r} for r in rows], Counter(), []
 

@@ -38,15 +38,15 @@ from skt_lib.stats import paired_support_interval
 from tools.val_sim import run_all, validation_set
 
 RULES = ("first", "least_penetration", "least_moved", "medoid")
-BOUNDS = ("random", "best_of_n")
 
 
 def picks(drawn: list[np.ndarray], run: list[np.ndarray], cloud: np.ndarray,
-          moved: bool) -> dict[str, int]:
+          moved: bool) -> tuple[dict[str, int], np.ndarray]:
     """Which proposal each rule of :data:`RULES` runs, from the proposals as drawn and as
     run (``(T, 3)`` each, the same order) and the support's ``cloud (N, 3)``;
     ``least_moved`` only where the method moves its proposals (``moved``: on every support,
-    those the move left where they were included)."""
+    those the move left where they were included). Also each run proposal's
+    :func:`~skt_lib.learning.cloud_check.ring_penetrations` (m²)."""
     if not run or len(drawn) != len(run):
         raise ValueError(f"drawn, run: need the same proposals, got {len(drawn)} and {len(run)}")
     pen = ring_penetrations(run, cloud)
@@ -56,7 +56,7 @@ def picks(drawn: list[np.ndarray], run: list[np.ndarray], cloud: np.ndarray,
     if moved:
         shifts = [np.linalg.norm(r[0] - d[0]) for d, r in zip(drawn, run)]
         out["least_moved"] = int(np.argmin(shifts))
-    return out
+    return out, pen
 
 
 def score(outcomes: dict[tuple[str, str], list[bool]], levels: dict[str, str],
@@ -66,13 +66,13 @@ def score(outcomes: dict[tuple[str, str], list[bool]], levels: dict[str, str],
     rule against ``first`` on the same pairs."""
     keys = list(outcomes)
     groups = np.array([s for s, _ in keys])
+    level = np.array([levels[s] for s in groups])
     flags = np.array([outcomes[k] for k in keys], bool)
 
     def by_level(values: np.ndarray) -> dict[str, float | None]:
         out = {"all": float(values.mean())}
         for lv in LEVELS:
-            at = np.array([levels[s] == lv for s in groups])
-            out[lv] = float(values[at].mean()) if at.any() else None
+            out[lv] = float(values[level == lv].mean()) if (level == lv).any() else None
         return out
 
     values = {rule: flags[np.arange(len(keys)), [pick[s] for s in groups]]
@@ -119,13 +119,15 @@ def main(argv=None) -> int:
                              rng=item_rng(seed, f"val_sim/{args.method}", s.support_id),
                              n_proposals=p.n_proposals)
         assert isinstance(method, Proposals)
-        move, method.clear = method.clear and not args.no_clear, False
+        move = method.clear and not args.no_clear
+        method.clear = False  # the samples as drawn; moved here, so that both are at hand
         skts = method.propose(s.cloud)
         drawn = [k.positions for k in skts]
         run = [shifted(k, s.cloud).positions for k in skts] if move else drawn
-        for rule, i in picks(drawn, run, s.cloud, move).items():
+        picked, pen = picks(drawn, run, s.cloud, move)
+        for rule, i in picked.items():
             chosen[rule][s.support_id] = i
-        pens[s.support_id] = (ring_penetrations(run, s.cloud) * 1e6).tolist()
+        pens[s.support_id] = (pen * 1e6).tolist()
         tasks += [make_task(args.method, s, o, x, settings, proposal=i)
                   for o in objects for i, x in enumerate(run)]
     chosen = {r: c for r, c in chosen.items() if c}  # least_moved: only with the move

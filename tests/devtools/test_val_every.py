@@ -24,12 +24,13 @@ def test_each_rule_picks_what_it_says_from_the_cloud_and_the_proposals_alone():
     side /= np.linalg.norm(side, axis=1, keepdims=True)
     cloud = centres + REFERENCE_RING_RADIUS_M * side
     run = [base, _skt([0.1, 0, 0]), _skt([0.002, 0, 0])]  # 10 cm away: clear; 2 mm: cuts it too
-    got = picks(run, run, cloud, moved=False)
+    got, pen = picks(run, run, cloud, moved=False)
     assert got == {"first": 0, "least_penetration": 1, "medoid": 2}  # no move: no least_moved
+    assert pen[0] > pen[2] >= pen[1] == 0.0
     drawn = [run[0] - [0.003, 0, 0], run[1] - [0, 0.004, 0], run[2]]  # the last was not moved
-    assert picks(drawn, run, cloud, moved=True)["least_moved"] == 2
+    assert picks(drawn, run, cloud, moved=True)[0]["least_moved"] == 2
     # a support where the move left every proposal where it was still gets a pick
-    assert picks(run, run, cloud, moved=True)["least_moved"] == 0
+    assert picks(run, run, cloud, moved=True)[0]["least_moved"] == 0
     with pytest.raises(ValueError, match="the same proposals"):
         picks(drawn[:2], run, cloud, moved=True)
 
