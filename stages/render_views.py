@@ -3,7 +3,8 @@
 Inputs:  data/mesh_gen/supports.parquet + visual meshes; params common, compute, render_views.
 Outputs: data/render_views/<support_id>.npz (points (V, N, 3) float32 support frame,
          cameras (V, 4, 4) float32 camera-to-support OpenCV, n_visible (V,) int32),
-         render_views.rrd; reports/render_views/{metrics.json, report.md, views.png}.
+         render_views.rrd; with sensor_views_severity > 0 also sensor/<support_id>.npz (the
+         same arrays, a depth camera's views) for the training and validation supports; reports/render_views/{metrics.json, report.md, views.png}.
 """
 
 import functools
@@ -21,7 +22,7 @@ from skt_lib.geometry.build import SUPPORT_RGBA
 from skt_lib.geometry.export import read_obj
 from skt_lib.io import read_npz, read_table, remove_partial_writes
 from skt_lib.perception.camera_views import camera_viewer
-from skt_lib.perception.views import RENDER_SPEC, RenderTask, render_support
+from skt_lib.perception.views import RENDER_SPEC, SENSOR_DIR, RenderTask, render_support
 from skt_lib.schemas import SUPPORTS
 from stages._common import parse_args, run_items
 from viz.figures import cloud_grid
@@ -54,6 +55,7 @@ def main(argv=None) -> int:
         log.error("%s: %s (%s)", task.support_id, f.reason, f.message)
     if not results:
         raise DataError(f"{src}: no support rendered; failures {dict(failures)}")
+    sensor = _sensor_views(supports, src, out / SENSOR_DIR, seed, p, params.compute)
     render_ms = 1000 * np.array([t for r in results for t in r["render_s"]])
     write_run_log(Path(args.log_dir), "render_views", {
         "wall_s": wall, "render_ms_per_view_median": float(np.median(render_ms))})
@@ -73,6 +75,7 @@ def main(argv=None) -> int:
         ("n_views_frame_fallback" if p.sensor_severity > 0 else "n_views_rerendered"):
             sum(r["n_rerendered"] for r in results),
         "n_views_padded": sum(r["n_padded"] for r in results),
+        **({"sensor_views": sensor} if sensor else {}),
     }
     write_metrics(rep, metrics)
 
@@ -110,6 +113,12 @@ def main(argv=None) -> int:
                     f"Views re-rendered at 2× resolution: {metrics['n_views_rerendered']}") +
                 f"; padded with duplicates: {metrics['n_views_padded']}. "
                 f"On-surface rate (≤ 1 mm from the mesh): {metrics['on_surface_rate']:.4f}.")
+    if sensor:
+        report.text(f"Depth-camera views for training (`{SENSOR_DIR}/`, sensor severity "
+                    f"{p.sensor_views_severity:g}, the wall in view, the frame found from it): "
+                    f"{sensor['n_rendered']} of {sensor['n_supports']} training and validation "
+                    f"supports (failed: {sensor['failures_by_reason'] or 'none'}); views whose "
+                    f"frame fell back to the true camera pose: {sensor['n_views_frame_fallback']}.")
     report.text("Camera layout: azimuth " + f"{p.azimuth_deg} × elevation {p.elevation_deg} degrees, "
                 f"{p.distance_m} m from the support's bounding-box centre, looking at it, +z up.")
     first = list({level.loc[sid, "difficulty"]: sid for sid in reversed(sample)}.values())[::-1]
@@ -120,6 +129,29 @@ def main(argv=None) -> int:
     report.write()
     log.info("%d of %d supports rendered", len(results), len(tasks))
     return 0
+
+
+def _sensor_views(supports, src: Path, out: Path, seed: int, p: RenderViewsParams,
+                  compute) -> dict:
+    """With ``sensor_views_severity`` > 0, the training and validation supports' views as a
+    depth camera at that severity gives them (each view's generator is the clean view's),
+    into ``out``; their figures. Test supports get none: Table I's views stay the others."""
+    if p.sensor_views_severity == 0:
+        return {}
+    q = p.model_copy(update={"sensor_severity": p.sensor_views_severity})
+    tasks = [RenderTask(s.support_id, str(src / s.mesh_path), str(out / f"{s.support_id}.npz"),
+                        seed, q)
+             for s in supports.itertuples() if s.split in ("train", "val")]
+    out.mkdir(parents=True, exist_ok=True)
+    results, failures, failed = run_items(functools.partial(render_support, viewer=camera_viewer),
+                                          tasks, compute, "supports (depth camera)")
+    remove_partial_writes(out)
+    for task, f in failed:
+        log.error("%s (depth camera): %s (%s)", task.support_id, f.reason, f.message)
+    return {"severity": p.sensor_views_severity, "n_supports": len(tasks),
+            "n_rendered": len(results), "n_failed": len(failed),
+            "failures_by_reason": dict(sorted(failures.items())),
+            "n_views_frame_fallback": sum(r["n_rerendered"] for r in results)}
 
 
 if __name__ == "__main__":

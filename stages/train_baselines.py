@@ -42,9 +42,10 @@ def main(argv=None) -> int:
                            train_baselines=TrainBaselinesParams, sim_eval=ProposalsOnly)
     p, pb = params.train, params.train_baselines
     root, out, rep = Path(args.data_root), Path(args.data_dir), Path(args.reports_dir)
-    data = load_training_set(root)
-    train, val = data.train, data.val
-    cfg, settings = from_params(p, data.k, data.T, data.n_points)
+    sets = {v: load_training_set(root, v) for v in sorted({pb.views.get(m, "clean")
+                                                            for m in pb.models})}
+    any_set = next(iter(sets.values()))  # the families, waypoints and points are the same
+    cfg, settings = from_params(p, any_set.k, any_set.T, any_set.n_points)
     n_prop = params.sim_eval.n_proposals
     metrics, histories, walls = {}, {}, {}
     with geometry_memo():  # the same views for every model: each cloud searched once
@@ -58,21 +59,23 @@ def main(argv=None) -> int:
                          {k2: v if v is None else round(v, 4) for k2, v in m.items()})
 
             t0 = time.perf_counter()
-            predictor, best = train_baseline(name, cfg, data.templates, train, val, settings,
-                                             seed, n_prop, pb, on_epoch)
+            data = sets[pb.views.get(name, "clean")]
+            predictor, best = train_baseline(name, cfg, data.templates, data.train, data.val,
+                                             settings, seed, n_prop, pb, on_epoch)
             predictor.save(out / name)
             walls[name] = time.perf_counter() - t0
             curve = [h["val_traj_l2_mm"] for h in history]
             metrics[name] = {**best, "best_epoch": int(np.argmin(curve)), "epochs": p.epochs}
             histories[name] = history
     write_metrics(rep, metrics)
-    _write_report(rep, metrics, histories, len(train), len(val), p, n_prop)
+    _write_report(rep, metrics, histories, len(any_set.train), len(any_set.val), p, n_prop,
+                  {m: pb.views.get(m, "clean") for m in pb.models})
     write_run_log(Path(args.log_dir), "train_baselines", {"wall_s": walls})
     return 0
 
 
 def _write_report(rep: Path, metrics: dict, histories: dict, n_train: int, n_val: int, p,
-                  n_prop: int) -> None:
+                  n_prop: int, views: dict[str, str]) -> None:
     report = Report("train_baselines", rep)
     report.text(f"Learned baselines trained like SCTDN (`train`): {p.epochs} epochs × "
                 f"{p.views_per_epoch} views per training support ({n_train} supports), best epoch "
@@ -80,9 +83,14 @@ def _write_report(rep: Path, metrics: dict, histories: dict, n_train: int, n_val
                 "(never on training supports); wall-clock times: the git-ignored run log "
                 "`logs/train_baselines.json`.")
     keys = sorted({k for m in metrics.values() for k in m if k.startswith("val_")})
-    report.table(["model", *keys, "best epoch"],
-                 [[m, *("–" if v.get(k) is None else v[k] for k in keys), v["best_epoch"]]
-                  for m, v in metrics.items()])
+    report.table(["model", "views", *keys, "best epoch"],
+                 [[m, views[m], *("–" if v.get(k) is None else v[k] for k in keys),
+                   v["best_epoch"]] for m, v in metrics.items()])
+    report.text("Views (`train_baselines.views`): `clean` = `render_views`' ring, Table I's "
+                "views; `sensor` = its depth-camera views of the training and validation "
+                "supports (`render_views.sensor_views_severity`), trained and selected on; "
+                "`both` = the two in one pool, each epoch's views drawn from either, selected "
+                "on the clean validation views.")
     report.text("`val_traj_l2_mm`: mean waypoint distance (mm) of the prediction to the nearest "
                 "ground-truth SKT, contact from the predicted affordance; for the CVAEs it is "
                 f"one proposal (the first of {n_prop} fixed validation latents), "

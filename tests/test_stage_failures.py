@@ -44,7 +44,8 @@ def test_render_views_counts_failed_supports(monkeypatch, tmp_path):
     supports = pd.DataFrame({"support_id": ["s0", "s1", "s2", "s3"], "mesh_path": ["m"] * 4,
                              "difficulty": ["easy", "normal", "hard", "very_hard"], "family": ["peg"] * 4})
     p = SimpleNamespace(n_azimuth=1, n_elevation=1, n_points=8, noise_std_m=0.0,
-                        sensor_severity=0.0, width=4, height=3, fov_deg=40.0,
+                        sensor_severity=0.0, sensor_views_severity=0.0, width=4, height=3,
+                        fov_deg=40.0,
                         azimuth_deg=[0, 0], elevation_deg=[0, 0], distance_m=0.3)
 
     def fake_render(task):

@@ -57,7 +57,15 @@ def train_models(params, root: Path, seed: int, out: Path, methods) -> None:
     already there is kept (resume)."""
     p, pb = params.train, params.train_baselines
     needed = {MODEL_OF[m] for m in methods}
-    data = load_training_set(root)
+    sets: dict = {}  # the views a model learns from (train_baselines.views), loaded once
+
+    def views(name: str):
+        kind = pb.views.get(name, "clean")
+        if kind not in sets:
+            sets[kind] = load_training_set(root, kind)
+        return sets[kind]
+
+    data = views("sctdn")
     cfg, st = from_params(p, data.k, data.T, data.n_points)
     with geometry_memo():
         if "sctdn" in needed and not (out / "train" / "sctdn.pt").exists():
@@ -67,6 +75,7 @@ def train_models(params, root: Path, seed: int, out: Path, methods) -> None:
             d = out / "train_baselines" / name
             if name in needed and not any((d / f"{kind}.json").exists()
                                           for kind in ("sctdn", "vatmart", "skt_flow")):
+                data = views(name)
                 predictor, _ = train_baseline(name, cfg, data.templates, data.train, data.val,
                                               st, seed, params.sim_eval.n_proposals, pb)
                 predictor.save(d)

@@ -17,6 +17,7 @@ class RenderViewsParams(Section):
     n_points: int = Field(ge=16, le=100000, description="Points per view after farthest-point sampling.")
     noise_std_m: float = Field(ge=0.0, le=0.01, description="Depth noise along the ray; 0 = off.")
     sensor_severity: float = Field(0.0, ge=0.0, le=4.0, description="Depth-camera views (skt_lib/perception/camera_views.py): the wall in view, the sensor model of skt_lib/perception/sensor.py at this severity (1 = a structured-light / stereo camera's defaults), the support frame found from the wall as `skt predict --camera` finds it; 0 = a perfect ray cast of the support alone.")
+    sensor_views_severity: float = Field(0.0, ge=0.0, le=4.0, description="> 0: also depth-camera views (as sensor_severity > 0 makes them) of the training and validation supports at this severity, in data/render_views/sensor/, for the models train_baselines.views trains on them; 0 = none. Table I's views stay those of sensor_severity.")
 
     @model_validator(mode="after")
     def _ranges(self) -> "RenderViewsParams":

@@ -7,6 +7,8 @@ from pydantic import Field, model_validator
 from skt_lib.config import Section
 
 BASELINE_MODELS = ("sctdn_cp_feature", "vatmart", "vatmart_mod", "skt_flow")
+#: The views a model may learn from (``views``; :data:`skt_lib.learning.data.VIEW_DIRS`).
+VIEW_SETS = ("clean", "sensor", "both")
 
 
 class TrainBaselinesParams(Section):
@@ -21,6 +23,9 @@ class TrainBaselinesParams(Section):
     skt_flow_steps: int = Field(ge=1, le=1000, description="skt_flow: Euler steps from noise to an SKT.")
     skt_flow_hidden: int = Field(ge=8, le=4096, description="skt_flow: width of its MLP (three hidden layers) that predicts the flow's end point.")
     skt_flow_draws: int = Field(ge=1, le=256, description="skt_flow: (noise, ground-truth SKT, time) draws per cloud per training step (the backbone runs once per cloud).")
+
+    views: dict[Literal[BASELINE_MODELS], Literal[VIEW_SETS]] = Field(
+        default_factory=dict, description="The views a model learns from and is selected on (a model not named: clean): clean = render_views' ring, as Table I's views; sensor = its depth-camera views (render_views.sensor_views_severity > 0); both = the two in one pool, each epoch's views drawn from either, selected on the clean validation views.")
 
     @model_validator(mode="after")
     def _unique(self) -> "TrainBaselinesParams":

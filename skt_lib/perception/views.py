@@ -21,6 +21,9 @@ from skt_lib.perception.render import DepthRenderer, viewpoints
 from skt_lib.seeding import item_rng
 
 RENDER_SPEC = {"points": ("float32", 3), "cameras": ("float32", 3), "n_visible": ("int32", 1)}
+#: Where ``render_views`` and ``affordance_maps`` keep the depth-camera views of the training
+#: and validation supports (``render_views.sensor_views_severity`` > 0).
+SENSOR_DIR = "sensor"
 
 
 @dataclass(frozen=True)

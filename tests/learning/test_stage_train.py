@@ -46,7 +46,8 @@ def test_training_refuses_to_select_on_training_supports(name, monkeypatch, tmp_
                        np.ones((2, 16), np.float32), np.ones(2, bool))
            for i in range(3)]
     monkeypatch.setattr(stage, "load_sections", lambda *_, **__: SimpleNamespace(
-        train=SimpleNamespace(), train_baselines=SimpleNamespace(), common=SimpleNamespace(seed=0)))
+        train=SimpleNamespace(), train_baselines=SimpleNamespace(models=("skt_flow",), views={}),
+        common=SimpleNamespace(seed=0)))
     monkeypatch.setattr(data, "read_npz", lambda *a: {"templates": np.zeros((1, 10, 3)),
                                                       "T": 10, "k": 1})
     monkeypatch.setattr(data, "load_supports", lambda *a: sup)
