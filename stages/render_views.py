@@ -4,7 +4,8 @@ Inputs:  data/mesh_gen/supports.parquet + visual meshes; params common, compute,
 Outputs: data/render_views/<support_id>.npz (points (V, N, 3) float32 support frame,
          cameras (V, 4, 4) float32 camera-to-support OpenCV, n_visible (V,) int32),
          render_views.rrd; with sensor_views_severity > 0 also sensor/<support_id>.npz (the
-         same arrays, a depth camera's views) for the training and validation supports; reports/render_views/{metrics.json, report.md, views.png}.
+         same arrays, a depth camera's views) for the training and validation supports;
+         reports/render_views/{metrics.json, report.md, views.png}.
 """
 
 import functools
