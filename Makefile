@@ -4,6 +4,8 @@ SHELL := /bin/bash
 # One OpenBLAS kernel on every x86-64 CPU, so runs agree across machines (skt_lib/__init__.py
 # sets it too; here it also covers tools that load numpy before skt_lib)
 export OPENBLAS_CORETYPE ?= Haswell
+# ... on one thread per process: the stages run a process per core (skt_lib/__init__.py too)
+export OPENBLAS_NUM_THREADS ?= 1
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin

@@ -22,18 +22,32 @@ __version__ = "0.1.0"
 BLAS_CORETYPE = "Haswell"
 
 
-def _pin_blas_kernel() -> None:
-    """Set ``OPENBLAS_CORETYPE`` (unless the environment sets it) before numpy loads
-    OpenBLAS, which reads it once. Importing ``skt_lib`` first does it (``stages`` and the
-    ``skt`` command do); where numpy came first, it is too late: a warning says so."""
-    if _platform.machine().lower() not in ("x86_64", "amd64") or "OPENBLAS_CORETYPE" in _os.environ:
+#: Threads OpenBLAS computes with in every process of ours: one. Our stages run one process
+#: per core (``compute.n_workers``), each of which would otherwise start a thread per core
+#: for every product: on 2 cores the wall's RANSAC (``render_views``' depth-camera views)
+#: took 85-250 ms a view that way against 22 ms on one thread. One thread also keeps each
+#: product's order of operations the same on any machine, whatever its core count.
+BLAS_THREADS = "1"
+
+
+def _pin_blas() -> None:
+    """Set ``OPENBLAS_CORETYPE`` and ``OPENBLAS_NUM_THREADS`` (each unless the environment
+    sets it) before numpy loads OpenBLAS, which reads them once. Importing ``skt_lib`` first
+    does it (``stages`` and the ``skt`` command do); where numpy came first, it is too late:
+    a warning says so."""
+    pins = {"OPENBLAS_NUM_THREADS": BLAS_THREADS}
+    if _platform.machine().lower() in ("x86_64", "amd64"):
+        pins["OPENBLAS_CORETYPE"] = BLAS_CORETYPE
+    pins = {k: v for k, v in pins.items() if k not in _os.environ}
+    if not pins:
         return
-    _os.environ["OPENBLAS_CORETYPE"] = BLAS_CORETYPE
+    _os.environ.update(pins)
     if "numpy" in _sys.modules:
-        _warnings.warn("numpy was imported before skt_lib: its OpenBLAS kernel is the CPU's "
-                       f"own, not {BLAS_CORETYPE}, so results may differ from other machines' "
-                       f"in the last bits; set OPENBLAS_CORETYPE={BLAS_CORETYPE} or import "
-                       "skt_lib first", RuntimeWarning, stacklevel=2)
+        _warnings.warn("numpy was imported before skt_lib: its OpenBLAS kernel and thread "
+                       f"count are not ours ({pins}), so results may differ from other "
+                       f"machines' in the last bits and products run slower; set "
+                       + " ".join(f"{k}={v}" for k, v in pins.items()) + " or import skt_lib first",
+                       RuntimeWarning, stacklevel=2)
 
 
-_pin_blas_kernel()
+_pin_blas()

@@ -1,6 +1,7 @@
 """One OpenBLAS kernel on every x86-64 CPU (``skt_lib.BLAS_CORETYPE``): a stage process
 computes with it whatever kernel the CPU would pick, so machines agree (an AMD EPYC and an
-Intel Xeon made other contacts in ``contact_sim`` from the same seed before)."""
+Intel Xeon made other contacts in ``contact_sim`` from the same seed before); and on one
+OpenBLAS thread (``skt_lib.BLAS_THREADS``), whatever the core count."""
 
 import os
 import platform
@@ -23,10 +24,17 @@ get = ctypes.CDLL(lib).scipy_openblas_get_corename64_
 get.restype = ctypes.c_char_p
 print(get().decode())
 """
+THREADS = """
+import ctypes, glob, os, numpy
+lib = glob.glob(os.path.join(os.path.dirname(numpy.__file__), "..", "numpy.libs",
+                             "libscipy_openblas64*.so"))[0]
+print(ctypes.CDLL(lib).scipy_openblas_get_num_threads64_())
+"""
 
 
 def _run(code: str, **env) -> subprocess.CompletedProcess:
-    clean = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    clean = {k: v for k, v in os.environ.items()
+             if k not in ("OPENBLAS_CORETYPE", "OPENBLAS_NUM_THREADS")}
     return subprocess.run([sys.executable, "-W", "always", "-c", code], cwd=ROOT,
                           env=clean | env, capture_output=True, text=True, check=True)
 
@@ -35,9 +43,17 @@ def test_a_stage_process_computes_with_the_pinned_kernel():
     assert _run("import stages" + CORENAME).stdout.strip() == skt_lib.BLAS_CORETYPE
 
 
+def test_a_stage_process_computes_on_one_blas_thread():
+    assert _run("import stages" + THREADS).stdout.strip() == skt_lib.BLAS_THREADS == "1"
+    # without the pin OpenBLAS takes a thread per core (this check needs two or more)
+    if os.cpu_count() > 1:
+        assert _run("import numpy\nimport skt_lib" + THREADS).stdout.strip() != "1"
+
+
 def test_the_environment_overrides_the_pin():
     out = _run("import stages" + CORENAME, OPENBLAS_CORETYPE="Sandybridge")
     assert out.stdout.strip() == "Sandybridge"
+    assert _run("import stages" + THREADS, OPENBLAS_NUM_THREADS="2").stdout.strip() == "2"
 
 
 def test_numpy_loaded_first_is_warned_about():
