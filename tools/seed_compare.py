@@ -18,14 +18,13 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from skt_lib.config import LEVELS
 from skt_lib.config.params_file import load_params
 from skt_lib.errors import DataError
 from skt_lib.eval.protocol import per_pair
-from skt_lib.eval.seeds import orderings_over_seeds, seed_block
+from skt_lib.eval.seeds import _seed_pairs, orderings_over_seeds, seed_block
 from skt_lib.io import read_table, write_json_atomic
 from skt_lib.schemas import TRIALS
 
@@ -50,17 +49,11 @@ def merge_seeds(pairs: pd.DataFrame, base: int, runs: Path, repo: Path
     if block["status"] != "ok":
         raise DataError(f"{repo}: the extra seeds cannot be merged: {block['reason']}")
     doc = json.loads(runs.read_text())
-    listed = pd.MultiIndex.from_tuples([tuple(p) for p in doc["pairs"]])
+    listed = [tuple(p) for p in doc["pairs"]]
     out = {base: pairs}
     for seed in block["seeds"][1:]:
-        rows = []
-        for m, flags in doc["seeds"][str(seed)].items():
-            g = pairs[pairs["method"] == m].copy()
-            hung = pd.Series(np.asarray(flags, bool), index=listed)
-            g["success"] = hung.loc[pd.MultiIndex.from_frame(g[["support_id", "object_id"]])] \
-                .to_numpy()
-            rows.append(g)
-        out[seed] = pd.concat(rows, ignore_index=True)
+        flags = doc["seeds"][str(seed)]
+        out[seed] = _seed_pairs(pairs, listed, flags, flags)
     return out
 
 
