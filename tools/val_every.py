@@ -105,10 +105,6 @@ def main(argv=None) -> int:
     params = load_params(args.params)
     p, T, seed = params.sim_eval, params.clustering.T, params.common.seed
     supports, objects, missing = validation_set(args.data_root, T, seed, p)
-    if not supports or not objects:
-        print(f"ERROR: {args.data_root}: no validation supports with an SKT or no training "
-              "objects", file=sys.stderr)
-        return 2
     model = load_models(args.data_root, [args.method], T).get(args.method)
     pre = np.asarray(p.kpam_pre_hang_m, float)
     settings = trial_settings(p, params.contact_sim)

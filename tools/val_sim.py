@@ -63,10 +63,16 @@ def with_readout(predictor: SktPredictor, **changes) -> SktPredictor:
 
 def validation_set(root: Path, T: int, seed: int, p) -> tuple[list, list, list]:
     """(validation supports, training objects, validation supports without an SKT) under
-    ``root``, with ``sim_eval``'s grasps (``p``: its params)."""
-    return load_test_set(root, T, seed, p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg,
-                         support_split="val", object_split="train",
-                         grasp_sphere=p.grasp_sphere_directions)
+    ``root``, with ``sim_eval``'s grasps (``p``: its params). Exits with status 2, saying
+    why, where there is nothing to evaluate."""
+    supports, objects, missing = load_test_set(
+        root, T, seed, p.grasp_pitch_deg, p.grasp_rolls_deg, p.grasp_yaws_deg,
+        support_split="val", object_split="train", grasp_sphere=p.grasp_sphere_directions)
+    if not supports or not objects:
+        print(f"ERROR: {root}: no validation supports with an SKT or no training objects",
+              file=sys.stderr)
+        raise SystemExit(2)
+    return supports, objects, missing
 
 
 def run_all(tasks: list, compute, label: str) -> list[dict]:
@@ -115,10 +121,6 @@ def main(argv=None) -> int:
     if args.grasp_sphere is not None:
         p = p.model_copy(update={"grasp_sphere_directions": args.grasp_sphere})
     supports, objects, missing = validation_set(args.data_root, T, seed, p)
-    if not supports or not objects:
-        print(f"ERROR: {args.data_root}: no validation supports with an SKT or no training "
-              "objects", file=sys.stderr)
-        return 2
     models = load_models(args.data_root, args.methods, T)
     for name, directory in args.model:
         models[name] = PREDICTOR_OF[name].load(directory)

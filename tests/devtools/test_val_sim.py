@@ -125,3 +125,19 @@ def test_no_clear_runs_skt_flows_samples_as_drawn(tiny_evaluated, monkeypatch):
         drawn, moved = got[True]["skt_flow", s.support_id], got[False]["skt_flow", s.support_id]
         assert all(np.array_equal(a, k.positions) for a, k in zip(drawn, raw))
         assert all(np.array_equal(a, shifted(k, s.cloud).positions) for a, k in zip(moved, raw))
+
+
+@pytest.mark.parametrize("found", [([], ["object"], []), (["support"], [], [])])
+def test_nothing_to_validate_on_is_a_clear_error(monkeypatch, capsys, found):
+    from types import SimpleNamespace
+
+    import tools.val_sim as val_sim
+
+    monkeypatch.setattr(val_sim, "load_test_set", lambda *a, **k: found)
+    p = SimpleNamespace(grasp_pitch_deg=0, grasp_rolls_deg=(0,), grasp_yaws_deg=(0,),
+                        grasp_sphere_directions=0)
+    with pytest.raises(SystemExit) as exit_:
+        val_sim.validation_set("data-x", 40, 0, p)
+    assert exit_.value.code == 2
+    assert "data-x: no validation supports with an SKT or no training objects" in \
+        capsys.readouterr().err
