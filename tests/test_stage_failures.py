@@ -12,7 +12,7 @@ import pytest
 from skt_lib.config import ComputeParams
 from skt_lib.errors import DataError, ItemFailure
 from stages import contact_sim, render_views
-from viz import contact_sim_report
+from viz import contact_sim_report, render_views_report
 
 COMPUTE = ComputeParams(backend="local", n_workers=1)
 
@@ -59,10 +59,10 @@ def test_render_views_counts_failed_supports(monkeypatch, tmp_path):
         render_views=p, common=SimpleNamespace(seed=1), compute=COMPUTE))
     monkeypatch.setattr(render_views, "read_table", lambda *a: supports)
     monkeypatch.setattr(render_views, "render_support", fake_render)
-    monkeypatch.setattr(render_views, "read_npz", lambda *a: {
+    monkeypatch.setattr(render_views_report, "read_npz", lambda *a: {
         "points": np.zeros((1, 8, 3), np.float32), "cameras": np.tile(np.eye(4), (1, 1, 1))})
-    _quiet(monkeypatch, render_views, "log_points", "log_camera", "log_mesh", "cloud_grid")
-    monkeypatch.setattr(render_views, "read_obj",
+    _quiet(monkeypatch, render_views_report, "log_points", "log_camera", "log_mesh", "cloud_grid")
+    monkeypatch.setattr(render_views_report, "read_obj",
                         lambda path: [SimpleNamespace(vertices=None, faces=None)])
     assert render_views.main(_args(tmp_path)) == 0
     m = json.loads((tmp_path / "rep" / "metrics.json").read_text())
