@@ -238,6 +238,18 @@ def _written(ws: Path, path: str) -> bool:
     return bool(git("status", "--porcelain", "--untracked-files=all", "--", path, cwd=ws).strip())
 
 
+def merged_seeds(ws: Path) -> bool:
+    """Whether the workspace's ``reports/seeds`` are this run's: written by its seed step (not
+    the default's, as the clone checked them out) and merged by its ``sim_eval`` (whose
+    metrics' ``seeds`` block is ``ok``; an earlier seed step's, on models since retrained, is
+    ``stale`` there and is left out of the collection rather than reported)."""
+    if not _written(ws, "reports/seeds"):
+        return False
+    metrics = ws / "reports" / "sim_eval" / "metrics.json"
+    return metrics.is_file() and \
+        (json.loads(metrics.read_text()).get("seeds") or {}).get("status") == "ok"
+
+
 def seed_segments(segments: list[dict]) -> list[dict]:
     """The seed step's segments that made the current seeds: those since a pipeline segment
     last ran a stage other than ``sim_eval`` (a rerun model stage makes earlier seeds stale;
@@ -264,7 +276,7 @@ def collect(ws: Path, dest: Path, commit: str) -> dict:
     tmp = dest.with_name(dest.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     shutil.copytree(ws / "reports", tmp, ignore=shutil.ignore_patterns(*NOT_COLLECTED))
-    if not _written(ws, "reports/seeds"):  # the default's seeds, as the clone checked them out
+    if not merged_seeds(ws):
         shutil.rmtree(tmp / "seeds", ignore_errors=True)
     elif (tmp / "seeds" / "seed_runs.json").is_file():  # the default predictor against the rival
         by_seed = seed_pairs(ws)

@@ -181,3 +181,25 @@ def test_seeds_are_made_before_the_one_sim_eval_that_merges_them():
     assert seed_segments([seg("pipeline", "train"), made, seg("pipeline", "sim_eval")]) == [made]
     # a model stage rerun after them makes them stale
     assert seed_segments([made, seg("pipeline", "train", "sim_eval")]) == []
+
+
+def test_only_seeds_the_run_merged_are_collected(tmp_path):
+    from tools.paper import merged_seeds
+
+    ws = tmp_path
+    seeds = ws / "reports" / "seeds" / "seed_runs.json"
+    metrics = ws / "reports" / "sim_eval" / "metrics.json"
+    seeds.parent.mkdir(parents=True)
+    metrics.parent.mkdir(parents=True)
+    seeds.write_text("{}")
+    git = ["git", "-c", "user.name=test", "-c", "user.email=test@example.com"]
+    for cmd in (["init", "-q"], ["add", "-A"], ["commit", "-q", "-m", "checked out"]):
+        subprocess.run([*git, *cmd], cwd=ws, check=True)
+    metrics.write_text(json.dumps({"seeds": {"status": "ok"}}))
+    assert not merged_seeds(ws)  # the default's seeds, as checked out: not the run's
+    seeds.write_text('{"seeds": {}}')  # written by the run's seed step ...
+    assert merged_seeds(ws)  # ... and merged by its sim_eval
+    metrics.write_text(json.dumps({"seeds": {"status": "stale", "reason": "other inputs"}}))
+    assert not merged_seeds(ws)  # an earlier seed step's, on other models
+    metrics.write_text(json.dumps({}))
+    assert not merged_seeds(ws)
