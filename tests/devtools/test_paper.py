@@ -118,7 +118,8 @@ def test_reports_are_collected_with_commit_and_stage_figures(paper_runs):
     assert (reports / "dvc.lock").read_bytes() == (killed / "dvc.lock").read_bytes()
     assert "| **pipeline** |" in (reports / "README.md").read_text()
     # the clone's copies of the default's other reports are not the paper run's
-    for other in ("camera", "seeds", "bench", "tests", "train/diagnostics.json"):
+    for other in ("camera", "seeds", "bench", "tests", "paper", "train/diagnostics.json",
+                  "sim_eval/hidden_views.md"):
         assert not (reports / other).exists(), other
     # run again on an up-to-date workspace: nothing reruns, the same reports
     before = (reports / "sim_eval" / "metrics.json").read_bytes()
