@@ -165,9 +165,10 @@ def run_segment(ws: Path, commit: str, cmd: list[str], kind: str, log: Path) -> 
 
 
 def clear_stale_rwlock(ws: Path) -> None:
-    """Remove DVC's ``.dvc/tmp/rwlock`` when every process it names is gone: a killed run
-    leaves it behind, and DVC counts a killed process that nobody reaped (a zombie, where the
-    container's init does not reap) as alive, refusing to run."""
+    """Remove DVC's ``.dvc/tmp/rwlock`` when it names processes and every one is gone: a
+    killed run leaves it behind, and DVC counts a killed process that nobody reaped (a zombie,
+    where the container's init does not reap) as alive, refusing to run. A lock naming none
+    (what DVC leaves after a run that ended) is left as it is."""
     path = ws / ".dvc" / "tmp" / "rwlock"
     if not path.exists():
         return
@@ -177,7 +178,7 @@ def clear_stale_rwlock(ws: Path) -> None:
         lock = {}
     infos = [*lock.get("write", {}).values(),
              *(i for infos in lock.get("read", {}).values() for i in infos)]
-    if not any(_alive(i.get("pid")) for i in infos):
+    if infos and not any(_alive(i.get("pid")) for i in infos):
         print(f"paper: removing {path}, left by a killed run", flush=True)
         path.unlink()
 

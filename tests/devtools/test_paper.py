@@ -204,3 +204,22 @@ def test_only_seeds_the_run_merged_are_collected(tmp_path):
     assert not merged_seeds(ws)  # an earlier seed step's, on other models
     metrics.write_text(json.dumps({}))
     assert not merged_seeds(ws)
+
+
+def test_a_dvc_lock_is_removed_only_when_it_names_processes_all_gone(tmp_path, capsys):
+    from tools.paper import clear_stale_rwlock
+
+    lock = tmp_path / ".dvc" / "tmp" / "rwlock"
+    lock.parent.mkdir(parents=True)
+    lock.write_text(json.dumps({"read": {}, "write": {}}))  # what an ended run leaves
+    clear_stale_rwlock(tmp_path)
+    assert lock.exists() and not capsys.readouterr().out
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    held = {"write": {"data/x": {"pid": os.getpid(), "cmd": "dvc repro"}}}
+    lock.write_text(json.dumps(held))  # a live run's
+    clear_stale_rwlock(tmp_path)
+    assert lock.exists()
+    lock.write_text(json.dumps({"read": {"data/x": [{"pid": gone.pid, "cmd": "dvc repro"}]}}))
+    clear_stale_rwlock(tmp_path)  # a killed run's
+    assert not lock.exists() and "left by a killed run" in capsys.readouterr().out
