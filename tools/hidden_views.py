@@ -6,8 +6,8 @@ those supports against the rest.
 
 Every generated support is a wall plate (``x ∈ [0, 1 cm]``, support frame) with its strokes
 starting on the plate's front face, so a view that shows the support's link to the wall has
-points in the band :data:`BAND_M` in front of it. A camera looking along a peg (the ring has
-one or two such views per support) sees its knob, or its tip, and nothing of the rod behind
+points in the band :data:`BAND_M` in front of it. A camera looking along a peg (about 3 % of
+the ring's views) sees its knob, or its tip, and nothing of the rod behind
 it: from that cloud no method can tell where the rod runs. A view is *hiding* when fewer
 than :data:`MIN_POINTS` of its points lie in the band.
 
@@ -118,7 +118,21 @@ def picture(rows: pd.DataFrame, root: Path, path: Path) -> bool:
     return True
 
 
-def report(d: pd.DataFrame, methods: dict, has_picture: bool) -> str:
+def split_summary(d: pd.DataFrame) -> dict[str, dict]:
+    """Per split: supports, views, hiding views, supports with one or more, and (splits of
+    :data:`EVALUATED`) the supports whose evaluated view hides."""
+    out = {}
+    for split, g in d.groupby("split", sort=False):
+        hiding = np.array([(c < MIN_POINTS).sum() for c in g["counts"]])
+        out[split] = {"supports": len(g), "views": int(sum(len(c) for c in g["counts"])),
+                      "hiding_views": int(hiding.sum()),
+                      "supports_with_hiding": int((hiding > 0).sum()),
+                      "evaluated_hiding": (g.loc[g["view_count"] < MIN_POINTS, "support_id"].tolist()
+                                           if split in EVALUATED else None)}
+    return out
+
+
+def report(splits: dict, methods: dict, has_picture: bool) -> str:
     lines = ["# Views that hide where a support leaves the wall", "",
              f"`tools/hidden_views.py`: a view *hides* when fewer than {MIN_POINTS} of its points "
              f"lie {1000 * (BAND_M[0] - PLATE_THICKNESS_M):.0f}–"
@@ -127,14 +141,11 @@ def report(d: pd.DataFrame, methods: dict, has_picture: bool) -> str:
              "tools.hidden_views` (after `make repro`).", "",
              "| split | supports | views | hiding views | supports with one or more | evaluated views hiding |",
              "|---|---|---|---|---|---|"]
-    for split, g in d.groupby("split", sort=False):
-        n_hiding = np.array([(c < MIN_POINTS).sum() for c in g["counts"]])
-        n_views = sum(len(c) for c in g["counts"])
-        eval_hiding = (g.loc[g["view_count"] < MIN_POINTS, "support_id"].tolist()
-                       if split in EVALUATED else None)
-        lines.append(f"| {split} | {len(g)} | {n_views} | {int(n_hiding.sum())} "
-                     f"({100 * n_hiding.sum() / n_views:.1f} %) | {int((n_hiding > 0).sum())} | "
-                     f"{'–' if eval_hiding is None else ', '.join(eval_hiding) or 'none'} |")
+    for split, v in splits.items():
+        listed = v["evaluated_hiding"]
+        lines.append(f"| {split} | {v['supports']} | {v['views']} | {v['hiding_views']} "
+                     f"({100 * v['hiding_views'] / v['views']:.1f} %) | {v['supports_with_hiding']} | "
+                     f"{'–' if listed is None else ', '.join(listed) or 'none'} |")
     if methods:
         lines += ["", "One-SKT rows of `sim_eval` (first proposals) on the test supports whose "
                   "evaluated view hides, against the rest:", "",
@@ -160,21 +171,16 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     seed = load_params(args.params).common.seed
     d = survey(args.data_root, seed)
-    hiding = set(d.loc[(d["split"] == "test") & (d["view_count"] < MIN_POINTS), "support_id"])
+    splits = split_summary(d)
+    hiding = set(splits["test"]["evaluated_hiding"]) if "test" in splits else set()
     trials_path = args.trials or args.data_root / "sim_eval" / "trials.parquet"
     methods = by_method(pd.read_parquet(trials_path), hiding) if trials_path.is_file() else {}
     args.out.mkdir(parents=True, exist_ok=True)
-    shown = d[(d["split"] == "test") & (d["view_count"] < MIN_POINTS)]
-    has_picture = picture(shown, args.data_root, args.out / "hidden_views.png")
+    has_picture = picture(d[d["support_id"].isin(hiding)], args.data_root,
+                          args.out / "hidden_views.png")
     write_json_atomic(args.out / "hidden_views.json", {
-        "band_m": list(BAND_M), "min_points": MIN_POINTS,
-        "splits": {split: {"supports": len(g), "views": int(sum(len(c) for c in g["counts"])),
-                           "hiding_views": int(sum((c < MIN_POINTS).sum() for c in g["counts"])),
-                           "evaluated_hiding": (g.loc[g["view_count"] < MIN_POINTS, "support_id"].tolist()
-                                                if split in EVALUATED else None)}
-                   for split, g in d.groupby("split", sort=False)},
-        "methods": methods})
-    text = report(d, methods, has_picture)
+        "band_m": list(BAND_M), "min_points": MIN_POINTS, "splits": splits, "methods": methods})
+    text = report(splits, methods, has_picture)
     (args.out / "hidden_views.md").write_text(text)
     print(text)
     return 0
