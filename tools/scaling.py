@@ -318,6 +318,10 @@ def presets_summary(data: dict) -> str:
                      f"{p['skts_planned']:,} | {p['wall_s'] / 3600:.1f} h (measured at "
                      f"{p['commit']}; `{slowest}` {p['stages'][slowest]['wall_s'] / 60:.0f} min "
                      "of it) |")
+        if p.get("seeds_wall_s"):
+            lines.append(f"| paper, its seed step (two more training seeds of every learned "
+                         f"method) | {p['n_supports']} | – | {p['seeds_wall_s'] / 60:.0f} min "
+                         f"(measured at {p['commit']}) |")
     elif paper:
         slowest = max(paper, key=paper.get)
         lines.append(f"| paper | {PAPER['n_supports']} | "
