@@ -191,8 +191,8 @@ def paper_table_one(paper: dict, default: dict) -> str:
     lines = [f"Success rate (%) at the paper's scale (`make paper`, "
              f"[reports/paper](reports/paper/README.md)): {paper['n_test_supports']} test "
              f"supports × {paper['n_test_objects']} test objects, one trial per pair and method; "
-             "brackets: the 95 % interval from a bootstrap over test supports (the support is "
-             "the unit of evidence). *SKT-Hang*: the paper's published All; *default*: the "
+             "brackets: the 95 % interval of a bootstrap over test supports (the unit of "
+             "evidence). *SKT-Hang*: the paper's published All; *default*: the "
              "embedded default's All (20 test supports, `make repro`)"
              + (f"; *seeds*: All over training seeds {', '.join(map(str, seeds['seeds']))}, "
                 "mean [min–max]." if merged else "."), "",

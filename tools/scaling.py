@@ -319,8 +319,8 @@ def presets_summary(data: dict) -> str:
                      f"{p['commit']}; `{slowest}` {p['stages'][slowest]['wall_s'] / 60:.0f} min "
                      "of it) |")
         if p.get("seeds_wall_s"):
-            lines.append(f"| paper, its seed step (two more training seeds of every learned "
-                         f"method) | {p['n_supports']} | – | {p['seeds_wall_s'] / 60:.0f} min "
+            lines.append(f"| paper, seed step (two more training seeds) | {p['n_supports']} | "
+                         f"– | {p['seeds_wall_s'] / 60:.0f} min "
                          f"(measured at {p['commit']}) |")
     elif paper:
         slowest = max(paper, key=paper.get)

@@ -165,8 +165,8 @@ def test_paper_run_is_recorded_measured_and_stale_counts_forgotten(tmp_path):
     summary = scaling.presets_summary(data)
     assert ("| paper (`make paper`, one training seed) | 472 | 23,600 | 1.5 h (measured at "
             "abcdef1; `rrt_skts` 60 min of it) |") in summary
-    assert ("| paper, its seed step (two more training seeds of every learned method) | 472 | "
-            "– | 15 min (measured at abcdef1) |") in summary
+    assert ("| paper, seed step (two more training seeds) | 472 | – | 15 min (measured at "
+            "abcdef1) |") in summary
     assert "extrapolated" not in summary and "resized" not in summary
     table = scaling.paper_table(data)
     assert "| `rrt_skts` | 8.0 | 60.0 | 116.7 | 1600 |" in table
