@@ -77,14 +77,17 @@ def survey(root: Path, seed: int) -> pd.DataFrame:
 def by_method(trials: pd.DataFrame, hiding: set[str]) -> dict[str, dict]:
     """Per method: pairs and success (first proposals) on supports whose evaluated view hides
     (``hiding``) and on the rest."""
+    def rate(success: pd.Series) -> float | None:
+        return float(success.mean()) if len(success) else None
+
     first = trials[trials["proposal"].fillna(0) == 0]
     out = {}
     for method, g in first.groupby("method", sort=False):
         hid = g["support_id"].isin(hiding)
         out[method] = {"hiding_pairs": int(hid.sum()),
-                       "hiding_success": float(g.loc[hid, "success"].mean()) if hid.any() else None,
+                       "hiding_success": rate(g.loc[hid, "success"]),
                        "other_pairs": int((~hid).sum()),
-                       "other_success": float(g.loc[~hid, "success"].mean()) if (~hid).any() else None}
+                       "other_success": rate(g.loc[~hid, "success"])}
     return out
 
 
@@ -102,9 +105,11 @@ def picture(rows: pd.DataFrame, root: Path, path: Path) -> bool:
         points = read_npz(root / "render_views" / f"{r.support_id}.npz", RENDER_SPEC)["points"]
         mesh = read_obj(r.mesh)[0].vertices
         best = int(np.argmax(r.counts))
-        for ax, view, what in ((ax_row[0], r.view, "evaluated"), (ax_row[1], best, "most revealing")):
+        for ax, view, what in ((ax_row[0], r.view, "evaluated"),
+                               (ax_row[1], best, "most revealing")):
             ax.scatter(mesh[:, 0], mesh[:, 2], s=2, c="0.85", label="support mesh vertices")
-            ax.scatter(points[view][:, 0], points[view][:, 2], s=2, c="tab:blue", label="view's cloud")
+            ax.scatter(points[view][:, 0], points[view][:, 2], s=2, c="tab:blue",
+                       label="view's cloud")
             ax.axvspan(*BAND_M, color="tab:orange", alpha=0.15, label="band in front of the plate")
             ax.set_title(f"{r.support_id} ({r.difficulty}), view {view} ({what}): "
                          f"{int(r.counts[view])} points in the band", fontsize=9)
@@ -124,11 +129,11 @@ def split_summary(d: pd.DataFrame) -> dict[str, dict]:
     out = {}
     for split, g in d.groupby("split", sort=False):
         hiding = np.array([(c < MIN_POINTS).sum() for c in g["counts"]])
+        evaluated = g.loc[g["view_count"] < MIN_POINTS, "support_id"].tolist()
         out[split] = {"supports": len(g), "views": int(sum(len(c) for c in g["counts"])),
                       "hiding_views": int(hiding.sum()),
                       "supports_with_hiding": int((hiding > 0).sum()),
-                      "evaluated_hiding": (g.loc[g["view_count"] < MIN_POINTS, "support_id"].tolist()
-                                           if split in EVALUATED else None)}
+                      "evaluated_hiding": evaluated if split in EVALUATED else None}
     return out
 
 
@@ -139,12 +144,14 @@ def report(splits: dict, methods: dict, has_picture: bool) -> str:
              f"{1000 * (BAND_M[1] - PLATE_THICKNESS_M):.0f} mm in front of the wall plate, where "
              "every generated support's strokes leave it. Regenerate: `.venv/bin/python -m "
              "tools.hidden_views` (after `make repro`).", "",
-             "| split | supports | views | hiding views | supports with one or more | evaluated views hiding |",
+             "| split | supports | views | hiding views | supports with one or more "
+             "| evaluated views hiding |",
              "|---|---|---|---|---|---|"]
     for split, v in splits.items():
         listed = v["evaluated_hiding"]
+        share = 100 * v["hiding_views"] / v["views"]
         lines.append(f"| {split} | {v['supports']} | {v['views']} | {v['hiding_views']} "
-                     f"({100 * v['hiding_views'] / v['views']:.1f} %) | {v['supports_with_hiding']} | "
+                     f"({share:.1f} %) | {v['supports_with_hiding']} | "
                      f"{'–' if listed is None else ', '.join(listed) or 'none'} |")
     if methods:
         lines += ["", "One-SKT rows of `sim_eval` (first proposals) on the test supports whose "
