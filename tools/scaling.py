@@ -404,6 +404,7 @@ def main(argv=None) -> int:
     ap.add_argument("--forget", type=int, nargs="+", default=[], metavar="N",
                     help="drop these support counts' runs (measured on code since changed)")
     args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)  # before a run of most of an hour, not after
     path = args.out / "scaling.json"
     stages = list(yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"])
     params = yaml.safe_load((ROOT / "params.yaml").read_text())
