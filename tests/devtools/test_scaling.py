@@ -158,10 +158,6 @@ def test_paper_run_is_recorded_measured_and_stale_counts_forgotten(tmp_path):
     assert scaling.main(["--paper-run", str(paper / "run.json"), "--forget", "60", "120",
                          "--out", str(tmp_path)]) == 0
     data = json.loads((tmp_path / "scaling.json").read_text())
-    # an --out folder that does not exist yet is made (a fresh run once lost 43 min to it)
-    assert scaling.main(["--paper-run", str(paper / "run.json"), "--out",
-                         str(tmp_path / "new" / "out")]) == 0
-    assert json.loads((tmp_path / "new" / "out" / "scaling.json").read_text())["paper_run"]
     assert data["runs"] == [] and "peak_rss_mb" not in data
     p = data["paper_run"]
     assert (p["commit"], p["n_supports"], p["wall_s"]) == ("abcdef1", 472, 5400.0)
@@ -177,3 +173,7 @@ def test_paper_run_is_recorded_measured_and_stale_counts_forgotten(tmp_path):
     assert "| `sim_eval` | – | 30.0 | 58.3 | 2500 |" in table
     assert "seed step" in table and "15.0 min" in table
     assert (tmp_path / "scaling.png").stat().st_size > 10_000
+    # an --out folder that does not exist yet is made (a fresh run once lost 43 min to it)
+    assert scaling.main(["--paper-run", str(paper / "run.json"), "--out",
+                         str(tmp_path / "new" / "out")]) == 0
+    assert json.loads((tmp_path / "new" / "out" / "scaling.json").read_text())["paper_run"]
