@@ -10,6 +10,7 @@ import numpy as np
 
 from skt_lib.config import LEVELS
 from skt_lib.eval.clear_shift import shifted
+from skt_lib.eval.contact_hypotheses import ContactHypotheses, propose
 from skt_lib.eval.methods import load_models, method_for
 from skt_lib.eval.protocol import load_test_set, make_task, trial_settings
 from skt_lib.io import read_npz, read_table
@@ -58,14 +59,14 @@ def sctdn_bench(root: Path) -> dict:
     return {"sctdn_inference_ms_median": _median_ms(root, predictor.predict)}
 
 
-def flow_bench(root: Path, n_samples: int, seed: int) -> dict:
-    """skt_flow inference, batch 1: N points in → ``n_samples`` samples ordered by the cloud
-    check, the first moved clear of the points (the one SKT its single-SKT row runs), model
-    loaded."""
+def flow_bench(root: Path, n_samples: int, seed: int, n_contacts: int) -> dict:
+    """skt_flow inference, batch 1: N points in → ``n_samples`` samples from ``n_contacts``
+    contact hypotheses ordered by the cloud check, the first moved clear of the points (the
+    one SKT its single-SKT row runs), model loaded."""
     predictor = FlowPredictor.load(root / "train_baselines" / "skt_flow")
-    rng = np.random.default_rng(seed)
+    rng, h = np.random.default_rng(seed), ContactHypotheses(n_contacts)
     return {"skt_flow_inference_ms_median": _median_ms(
-        root, lambda cloud: shifted(predictor.propose(cloud, rng, n_samples)[0], cloud))}
+        root, lambda cloud: shifted(propose(predictor, cloud, rng, n_samples, h)[0], cloud))}
 
 
 #: The methods whose SKTs the executor bench runs: the ground truth (mostly hung) and the

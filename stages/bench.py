@@ -122,7 +122,8 @@ def main(argv=None) -> int:
     measure = {
         "rrt": lambda: rrt_bench(params, root, args.rrt_per_level, args.rrt_skts),
         "sctdn": lambda: sctdn_bench(root), "cli": lambda: cli_bench(root),
-        "flow": lambda: flow_bench(root, params.sim_eval.n_proposals, params.common.seed),
+        "flow": lambda: flow_bench(root, params.sim_eval.n_proposals, params.common.seed,
+                                   params.sim_eval.flow_contacts),
         "sim": lambda: sim_bench(params, root, args.per_level),
         "render": lambda: _in_tmp(lambda tmp: render_bench(params, root, args.per_level, tmp)),
         "imports": lambda: _in_tmp(lambda tmp: bench_dense_imports(Path(args.params), root, tmp))}

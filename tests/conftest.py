@@ -32,7 +32,7 @@ TINY = {
                         "skt_flow_n_control": 4, "skt_flow_steps": 4, "skt_flow_hidden": 32, "skt_flow_draws": 2},
     "sim_eval": {"methods": ["oracle", "oracle_floating", "template_only", "sctdn", "kpam",
                              "vatmart", "skt_flow", "omnihang"],
-                 "n_proposals": 3, "omnihang_max_checks": 20000,
+                 "n_proposals": 3, "flow_contacts": 2, "omnihang_max_checks": 20000,
                  "robot_base_m": [0.15, 0.0, 0.3], "linear_damping": 0.04, "angular_damping": 0.04,
                  "settle_linear_damping": 1.0, "settle_angular_damping": 5.0, "grasp_pitch_deg": [45.0, 30.0, 60.0],
                  "grasp_rolls_deg": [0.0, 180.0], "grasp_yaws_deg": [0.0], "grasp_sphere_directions": 4, "setup_clearance_m": 0.002, "setup_fallbacks": 3, "step_m": 0.002, "steps_per_command": 2, "hold_steps": 60,

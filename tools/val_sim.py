@@ -112,6 +112,10 @@ def main(argv=None) -> int:
     ap.add_argument("--no-clear", action="store_true",
                     help="run skt_flow's samples as drawn, not moved clear of the cloud "
                          "(skt_lib/eval/clear_shift.py): what the move gains")
+    ap.add_argument("--flow-contacts", type=int, default=None, metavar="K",
+                    help="skt_flow's samples from K contact hypotheses, not "
+                         "sim_eval.flow_contacts (skt_lib/eval/contact_hypotheses.py; 1: the "
+                         "affordance's argmax alone)")
     ap.add_argument("--out", default=Path("data/val_sim/val_sim.json"), type=Path)
     args = ap.parse_args(argv)
     params = load_params(args.params)
@@ -120,6 +124,8 @@ def main(argv=None) -> int:
         p = p.model_copy(update={"robot_base_m": tuple(args.robot_base)})
     if args.grasp_sphere is not None:
         p = p.model_copy(update={"grasp_sphere_directions": args.grasp_sphere})
+    if args.flow_contacts is not None:
+        p = p.model_copy(update={"flow_contacts": args.flow_contacts})
     supports, objects, missing = validation_set(args.data_root, T, seed, p)
     models = load_models(args.data_root, args.methods, T)
     for name, directory in args.model:
@@ -134,7 +140,7 @@ def main(argv=None) -> int:
     def make(m: str, s):
         made = make_method(m, models.get(MODEL_OF.get(m)), s.gt, pre, p.kpam_lift_m,
                            rng=item_rng(seed, f"val_sim/{m}", s.support_id),
-                           n_proposals=p.n_proposals)
+                           n_proposals=p.n_proposals, flow_contacts=p.flow_contacts)
         if args.no_clear and isinstance(made, Proposals):
             made.clear = False
         return made
@@ -152,7 +158,7 @@ def main(argv=None) -> int:
     out = {"supports": len(supports), "supports_without_skt": missing, "objects": len(objects),
            "models": {name: str(d) for name, d in args.model}, "hang_taper": args.hang_taper,
            "check_families": args.check_families, "setup_fallbacks": n_fallbacks,
-           "skt_flow_moved_clear": not args.no_clear,
+           "skt_flow_moved_clear": not args.no_clear, "flow_contacts": p.flow_contacts,
            "robot_base_m": list(p.robot_base_m),
            "grasp_sphere_directions": p.grasp_sphere_directions,
            "methods": {m: {"success": table[m], "success_ci95": ci[m],

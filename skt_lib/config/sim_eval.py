@@ -17,6 +17,8 @@ class SimEvalParams(Section):
     methods: tuple[Literal[METHODS], ...] = Field(
         min_length=1, description="Methods evaluated (Table I rows); oracle_floating: the oracle SKT carried by a floating hand (no arm); sctdn_cp_feature, vatmart, vatmart_mod, skt_flow need train_baselines to train them; omnihang plans with OMPL on the cloud, given the ground-truth hang.")
     n_proposals: Proposals
+    flow_contacts: int = Field(
+        ge=1, le=10, description="skt_flow: its samples start from this many contact hypotheses, the affordance's argmax and the next most afforded points 1 cm apart (skt_lib/eval/contact_hypotheses.py); 1: the argmax alone.")
     omnihang_max_checks: int = Field(ge=100, le=10_000_000, description="omnihang: RRT-Connect budget per support, in collision checks (deterministic, unlike a time limit; a failed plan falls back to the straight approach).")
     robot_base_m: tuple[float, float, float] = Field(description="World position of the Panda base, m.")
     linear_damping: LinearDamping

@@ -16,10 +16,11 @@
   ``n_proposals`` SKTs (the paper counts a trial as hung if any of them hangs), ``predict``
   the first of them (the honest single-sample rate).
 - ``skt_flow``: conditional flow-matching samples (``train_baselines``,
-  :mod:`skt_lib.learning.flow`) ordered by the cloud check on the observed points, each then
-  moved clear of them (:mod:`skt_lib.eval.clear_shift`); ``predict`` gives the clearest, the
-  one SKT its single-SKT row executes, ``propose`` all ``n_proposals`` (its best-of-N row, as
-  VAT-Mart's).
+  :mod:`skt_lib.learning.flow`) from ``sim_eval.flow_contacts`` contact hypotheses
+  (:mod:`skt_lib.eval.contact_hypotheses`) ordered by the cloud check on the observed
+  points, each then moved clear of them (:mod:`skt_lib.eval.clear_shift`); ``predict``
+  gives the clearest, the one SKT its single-SKT row executes, ``propose`` all
+  ``n_proposals`` (its best-of-N row, as VAT-Mart's).
 - ``omnihang``: OMPL RRT-Connect to the ground-truth hanging pose (privileged), collision
   checked against the partial cloud only (:mod:`skt_lib.eval.omnihang`).
 
@@ -33,6 +34,8 @@ from typing import Protocol
 import numpy as np
 
 from skt_lib.errors import DataError
+from skt_lib.eval import contact_hypotheses
+from skt_lib.eval.contact_hypotheses import ContactHypotheses
 from skt_lib.eval.clear_shift import shifted
 from skt_lib.geometry.skt import skt_frames
 from skt_lib.learning.flow import FlowPredictor
@@ -113,16 +116,22 @@ class Proposals:
     ``rng`` (pass a fresh per-support generator: the proposals are then a function of the
     support); ``predict`` the first of them (skt_flow's: the clearest by the cloud check).
     ``clear``: each SKT then moved clear of the cloud
-    (:func:`~skt_lib.eval.clear_shift.shifted`; skt_flow's read-out)."""
+    (:func:`~skt_lib.eval.clear_shift.shifted`; skt_flow's read-out). ``contacts``: skt_flow's
+    contact hypotheses (:class:`~skt_lib.eval.contact_hypotheses.ContactHypotheses`; None:
+    the model's own ``propose``, from the affordance's argmax)."""
 
-    def __init__(self, predictor, rng: np.random.Generator, n: int, clear: bool = False):
-        self.predictor, self.n, self.clear = predictor, n, clear
+    def __init__(self, predictor, rng: np.random.Generator, n: int, clear: bool = False,
+                 contacts: ContactHypotheses | None = None):
+        self.predictor, self.n, self.clear, self.contacts = predictor, n, clear, contacts
         self.state = rng.bit_generator.state
 
     def propose(self, cloud: np.ndarray) -> list[Skt]:
         rng = np.random.Generator(np.random.PCG64())
         rng.bit_generator.state = self.state  # the same draws on every call
-        skts = self.predictor.propose(cloud, rng, self.n)
+        if self.contacts is None:
+            skts = self.predictor.propose(cloud, rng, self.n)
+        else:
+            skts = contact_hypotheses.propose(self.predictor, cloud, rng, self.n, self.contacts)
         return [shifted(k, cloud) for k in skts] if self.clear else skts
 
     def predict(self, cloud: np.ndarray) -> Skt:
@@ -147,19 +156,23 @@ class OmniHang:
 
 def make_method(name: str, predictor, gt_positions: np.ndarray, pre_hang: np.ndarray,
                 lift: float = 0.0, rng: np.random.Generator | None = None, n_proposals: int = 1,
-                omnihang: tuple | None = None) -> Method:
+                omnihang: tuple | None = None, flow_contacts: int = 1) -> Method:
     """The method ``name`` for one support (``gt_positions (T, 3)``, ξ_0 first).
 
     ``predictor``: the trained model of learned methods (:data:`MODEL_OF`); ``rng`` and
     ``n_proposals``: the proposers' latent draws; ``omnihang``: ``(object_points,
-    OmniHangSettings, seed)``."""
+    OmniHangSettings, seed)``; ``flow_contacts``: skt_flow's contact hypotheses (1: the
+    affordance's argmax alone)."""
     if name in LEARNED or name in PROPOSING:
         if predictor is None:
             raise ValueError(f"{name}: needs the trained predictor")
         if name in PROPOSING:
             if rng is None:
                 raise ValueError(f"{name}: needs a generator for its latents")
-            return Proposals(predictor, rng, n_proposals, clear=name == "skt_flow")
+            if name == "skt_flow":
+                return Proposals(predictor, rng, n_proposals, clear=True,
+                                 contacts=ContactHypotheses(flow_contacts))
+            return Proposals(predictor, rng, n_proposals)
         return Learned(predictor, deform=name != "template_only")
     if name == "omnihang":
         if omnihang is None:
@@ -199,7 +212,8 @@ def method_for(name: str, support_id: str, gt_positions: np.ndarray | None, para
         omni = (omni_points, settings, int(rng.integers(2**31)))
     return make_method(name, models.get(MODEL_OF.get(name)), gt_positions,
                        np.asarray(p.kpam_pre_hang_m, float), p.kpam_lift_m, rng=rng,
-                       n_proposals=n_proposals or p.n_proposals, omnihang=omni)
+                       n_proposals=n_proposals or p.n_proposals, omnihang=omni,
+                       flow_contacts=p.flow_contacts)
 
 
 def model_dir(root: Path, method: str) -> Path:

@@ -49,10 +49,12 @@ def test_predict_ply_and_npy_give_the_models_skt(capsys, data_root, view, tmp_pa
 def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, data_root, view,
                                                                      tmp_path):
     """A train_baselines/skt_flow folder as --model: the SKT is the first of the flow's N
-    samples (noise seeded with --seed) as the cloud check orders them, moved clear of the
-    cloud as sim_eval moves it; the JSON says so and carries no family; another seed draws
-    another SKT; --samples sets N."""
+    samples (noise seeded with --seed) from sim_eval's contact hypotheses as the cloud check
+    orders them, moved clear of the cloud as sim_eval moves it; the JSON says so and carries
+    no family; another seed draws another SKT; --samples sets N."""
+    from skt_lib.cli.flow_readout import N_CONTACTS
     from skt_lib.eval.clear_shift import shifted
+    from skt_lib.eval.contact_hypotheses import ContactHypotheses, propose
     from skt_lib.learning.flow import FlowPredictor
 
     np.save(tmp_path / "hook.npy", view)
@@ -67,7 +69,8 @@ def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, dat
     a, out = run("a", "--rrd", tmp_path / "a.rrd")
     flow = FlowPredictor.load(model)
     cloud, counts, _ = prepare_cloud(view, flow.cfg.n_points)
-    want = [shifted(w, cloud) for w in flow.propose(cloud, np.random.default_rng(0), 10)]
+    h = ContactHypotheses(N_CONTACTS)
+    want = [shifted(w, cloud) for w in propose(flow, cloud, np.random.default_rng(0), 10, h)]
     pos = np.array([w["position"] for w in a["waypoints"]])
     np.testing.assert_allclose(pos, want[0].positions, atol=1e-12)
     # the tiny model's samples lie close together, but not within the tolerance above: the
@@ -81,7 +84,7 @@ def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, dat
     b, _ = run("b", "--seed", "0")
     assert b["waypoints"] == a["waypoints"]  # the same seed: the same SKT
     c, _ = run("c", "--samples", "3")
-    want3 = flow.propose(cloud, np.random.default_rng(0), 3)
+    want3 = propose(flow, cloud, np.random.default_rng(0), 3, h)
     np.testing.assert_allclose([w["position"] for w in c["waypoints"]],
                                shifted(want3[0], cloud).positions, atol=1e-12)
     d, _ = run("d", "--seed", "1")
@@ -264,3 +267,15 @@ def test_camera_mode_warns_where_the_frame_may_be_centimetres_off(capsys, data_r
         if severity == 1.0:
             assert hidden == [] and np.linalg.norm(e[:3, 3]) <= 0.005
     assert off >= 1  # the corners' frames are that far off: the check is exercised
+
+
+def test_the_cli_draws_its_skt_as_table_is_skt_flow_row_does():
+    """``skt predict``'s defaults are the committed params' ``sim_eval.n_proposals`` and
+    ``sim_eval.flow_contacts``: the CLI's SKT comes from the same read-out as Table I's."""
+    from pathlib import Path
+
+    from skt_lib.cli.flow_readout import N_CONTACTS, N_SAMPLES
+    from skt_lib.config.params_file import load_params
+
+    p = load_params(Path(__file__).parents[2] / "params.yaml").sim_eval
+    assert (N_SAMPLES, N_CONTACTS) == (p.n_proposals, p.flow_contacts)

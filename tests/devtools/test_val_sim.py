@@ -85,11 +85,13 @@ def test_the_oracles_run_on_validation_and_the_robot_base_moves_the_panda(tiny_e
 
 def test_no_clear_runs_skt_flows_samples_as_drawn(tiny_evaluated, monkeypatch):
     """--no-clear hands the trials the flow's samples unmoved; by default they are moved clear
-    of the cloud (skt_lib.eval.clear_shift), as sim_eval runs them."""
+    of the cloud (skt_lib.eval.clear_shift), as sim_eval runs them, and drawn from
+    sim_eval.flow_contacts contact hypotheses; --flow-contacts 1: from the argmax alone."""
     import numpy as np
 
     import tools.val_sim as val_sim
     from skt_lib.eval.clear_shift import shifted
+    from skt_lib.eval.contact_hypotheses import ContactHypotheses, propose
     from skt_lib.eval.protocol import load_test_set
     from skt_lib.config.params_file import load_params
     from skt_lib.learning.flow import FlowPredictor
@@ -107,11 +109,11 @@ def test_no_clear_runs_skt_flows_samples_as_drawn(tiny_evaluated, monkeypatch):
 
     monkeypatch.setattr(val_sim, "run_rounds", capture)
     got = {}
-    for flag in ([], ["--no-clear"]):
+    for flag in ([], ["--no-clear"], ["--flow-contacts", "1"]):
         with pytest.raises(Stop):
             main(["--params", str(params_path), "--data-root", str(data), "--methods", "skt_flow",
                   *flag])
-        got[bool(flag)] = seen["positions"]
+        got[" ".join(flag)] = seen["positions"]
     params = load_params(params_path)
     p = params.sim_eval
     supports, _, _ = load_test_set(data, params.clustering.T, params.common.seed,
@@ -119,12 +121,20 @@ def test_no_clear_runs_skt_flows_samples_as_drawn(tiny_evaluated, monkeypatch):
                                    support_split="val", object_split="train",
                                    grasp_sphere=p.grasp_sphere_directions)
     flow = FlowPredictor.load(data / "train_baselines" / "skt_flow")
+    differs = []
     for s in supports:
         rng = item_rng(params.common.seed, "val_sim/skt_flow", s.support_id)
-        raw = flow.propose(s.cloud, rng, p.n_proposals)
-        drawn, moved = got[True]["skt_flow", s.support_id], got[False]["skt_flow", s.support_id]
+        state = rng.bit_generator.state
+        raw = propose(flow, s.cloud, rng, p.n_proposals, ContactHypotheses(p.flow_contacts))
+        rng.bit_generator.state = state
+        own = flow.propose(s.cloud, rng, p.n_proposals)
+        key = ("skt_flow", s.support_id)
+        drawn, moved, argmax = got["--no-clear"][key], got[""][key], got["--flow-contacts 1"][key]
         assert all(np.array_equal(a, k.positions) for a, k in zip(drawn, raw))
         assert all(np.array_equal(a, shifted(k, s.cloud).positions) for a, k in zip(moved, raw))
+        assert all(np.array_equal(a, shifted(k, s.cloud).positions) for a, k in zip(argmax, own))
+        differs.append(not all(np.array_equal(a, b) for a, b in zip(moved, argmax)))
+    assert any(differs)  # the hypotheses are not the argmax's samples again
 
 
 @pytest.mark.parametrize("found", [([], ["object"], []), (["support"], [], [])])
