@@ -254,12 +254,21 @@ def merged_seeds(ws: Path) -> bool:
 
 
 def seed_segments(segments: list[dict]) -> list[dict]:
-    """The seed step's segments that made the current seeds: those since a pipeline segment
-    last ran a stage other than ``sim_eval`` (a rerun model stage makes earlier seeds stale;
+    """The seed step's segments that made the current seeds: the last run of seed segments,
+    resumed across pipeline segments that ran nothing, back to the pipeline segment before it
+    that ran a stage (a finished seed step's merging ``sim_eval``, or the models); none when a
+    stage other than ``sim_eval`` ran after them (a rerun model stage makes them stale;
     ``sim_eval`` runs after them and merges them)."""
-    last = max((i for i, s in enumerate(segments)
-                if s["kind"] == "pipeline" and set(s["stages"]) - {"sim_eval"}), default=-1)
-    return [s for s in segments[last + 1:] if s["kind"] == "seeds"]
+    out = []
+    for s in reversed(segments):
+        ran = set(s.get("stages") or ())
+        if s["kind"] == "seeds":
+            out.append(s)
+        elif ran and out:
+            break
+        elif ran - {"sim_eval"}:
+            return []
+    return out[::-1]
 
 
 def collect(ws: Path, dest: Path, commit: str) -> dict:

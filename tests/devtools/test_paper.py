@@ -182,6 +182,14 @@ def test_seeds_are_made_before_the_one_sim_eval_that_merges_them():
     assert seed_segments([seg("pipeline", "train"), made, seg("pipeline", "sim_eval")]) == [made]
     # a model stage rerun after them makes them stale
     assert seed_segments([made, seg("pipeline", "train", "sim_eval")]) == []
+    # a seed step resumed (a pipeline segment that ran nothing between its parts) counts both;
+    # a later seed step (trials only, after a sim_eval change) is counted alone
+    a1, a2, b = seg("seeds"), seg("seeds"), seg("seeds")
+    a1["wall_s"], a2["wall_s"], b["wall_s"] = 1.0, 2.0, 3.0
+    first = [seg("pipeline", "train"), a1, seg("pipeline"), a2, seg("pipeline", "sim_eval")]
+    assert seed_segments(first) == [a1, a2]
+    again = [*first, seg("pipeline"), b, seg("pipeline", "sim_eval")]
+    assert [s["wall_s"] for s in seed_segments(again)] == [3.0]
 
 
 def test_only_seeds_the_run_merged_are_collected(tmp_path):
