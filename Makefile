@@ -141,9 +141,11 @@ camera: $(STAMP)
 train-diagnostics: $(STAMP)
 	@# short seeded SCTDN runs (overfit one batch, learning curve, contact term, train vs
 	@# val) into reports/train/diagnostics.{json,md}, and how far the templates lie from the
-	@# labels (reports/train/template_reach.*); needs the artifacts of `make repro`
+	@# labels (reports/train/template_reach.*), and where SCTDN's SKT lets the training objects
+	@# hit a Very Hard hook (reports/train/sctdn_sweeps.*); needs the artifacts of `make repro`
 	$(BIN)/python tools/train_diagnostics.py
 	$(BIN)/python tools/template_reach.py
+	$(BIN)/python -m tools.sctdn_sweeps
 
 clean-env:
 	rm -rf $(VENV)
