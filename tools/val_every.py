@@ -113,7 +113,7 @@ def main(argv=None) -> int:
         # val_sim's generator: its first proposal and best of N are the same SKTs as here
         method = make_method(args.method, model, s.gt, pre, p.kpam_lift_m,
                              rng=item_rng(seed, f"val_sim/{args.method}", s.support_id),
-                             n_proposals=p.n_proposals)
+                             n_proposals=p.n_proposals, flow_contacts=p.flow_contacts)
         assert isinstance(method, Proposals)
         move = method.clear and not args.no_clear
         method.clear = False  # the samples as drawn; moved here, so that both are at hand

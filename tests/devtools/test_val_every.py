@@ -83,10 +83,12 @@ def test_first_and_best_of_n_are_val_sims_rows_pair_for_pair(tiny_evaluated, tmp
 
     prm = load_params(params)
     p, T, seed = prm.sim_eval, prm.clustering.T, prm.common.seed
+    assert p.flow_contacts > 1  # sim_eval's contact hypotheses, which val_every must follow
     supports, _, _ = val_sim.validation_set(data, T, seed, p)
     model = load_models(data, ["skt_flow"], T)["skt_flow"]
     for s in supports:
         made = make_method("skt_flow", model, s.gt, np.asarray(p.kpam_pre_hang_m), p.kpam_lift_m,
-                           rng=item_rng(seed, "val_sim/skt_flow", s.support_id), n_proposals=3)
+                           rng=item_rng(seed, "val_sim/skt_flow", s.support_id), n_proposals=3,
+                           flow_contacts=p.flow_contacts)
         pen = ring_penetrations([k.positions for k in made.propose(s.cloud)], s.cloud) * 1e6
         assert got["penetration_mm2"][s.support_id] == pytest.approx(pen.tolist(), abs=1e-9)
