@@ -50,6 +50,22 @@ class SweepTask:
     step_m: float
 
 
+def object_sweeper(support, o: SktObject, spacing_m: float, step_m: float):
+    """``(checker, poses)`` for object ``o`` against the ``support`` mesh: its
+    :class:`MeshClearance` at ``spacing_m``, and ``poses(positions)``, the keypoint frames of
+    the SKT ``positions (T, 3)`` as executed (:func:`executed_path` at ``step_m``, far end
+    first) and the object frames there, ``(keypoint frames, object frames)``."""
+    mesh = read_obj(o.mesh)[0]
+    kp = np.asarray(o.keypoint, float).reshape(4, 4)
+    radius = float(np.linalg.norm(mesh.vertices - kp[:3, 3], axis=1).max())
+
+    def poses(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        keypoint_frames = executed_path(positions, step_m, radius)
+        return keypoint_frames, keypoint_frames @ invert(kp)
+
+    return MeshClearance(support, mesh, spacing_m), poses
+
+
 def sweep_support(task: SweepTask) -> dict:
     """Every object along every SKT of one support: ``{"support_id", "sweeps": [{object_id,
     kind, skt, clearance_m, deepest_at}]}``; ``deepest_at`` (share of the path from its
@@ -57,12 +73,9 @@ def sweep_support(task: SweepTask) -> dict:
     (support,) = read_obj(task.support_mesh)
     rows = []
     for kind, o in task.objects:
-        mesh = read_obj(o.mesh)[0]
-        kp = np.asarray(o.keypoint, float).reshape(4, 4)
-        radius = float(np.linalg.norm(mesh.vertices - kp[:3, 3], axis=1).max())
-        checker = MeshClearance(support, mesh, task.spacing_m)
+        checker, along = object_sweeper(support, o, task.spacing_m, task.step_m)
         for index, keypoints in enumerate(task.skts):
-            poses = executed_path(resample(keypoints, task.T), task.step_m, radius) @ invert(kp)
+            _, poses = along(resample(keypoints, task.T))
             at = None
             if kind == "test" and index == 0:  # every pose: where the deepest one lies
                 per_pose = checker.per_pose(poses)

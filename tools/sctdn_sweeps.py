@@ -6,7 +6,7 @@ nearly every failure is ``collided_before_hang``. This says *where*. For each va
 support of ``--level``, in its evaluated view (``tools/val_sim.py``'s, drawn as ``sim_eval``
 draws a test support's), SCTDN's read-out (``data/train``, the cloud check and all) gives one
 SKT; every training object is swept along it and along the support's stored SKT 0 by the
-exact mesh check ``rrt_skts`` re-checks with (:class:`~skt_lib.planning.collision.MeshClearance`
+exact mesh check ``rrt_skts`` re-checks with (:func:`tools.object_sweeps.object_sweeper`
 at its ``recheck_spacing_m``, the executed path at ``recheck_step_m``). Per sweep: the least
 clearance (negative: penetration into the support, mm; the check reads no deeper than its
 shell) and where along the executed path it lies (0: the path's far end, where the object
@@ -35,14 +35,12 @@ import numpy as np
 from skt_lib.config import LEVELS
 from skt_lib.config.params_file import load_params
 from skt_lib.geometry.export import read_obj
-from skt_lib.geometry.se3 import invert
-from skt_lib.geometry.skt import executed_path
 from skt_lib.io import write_json_atomic, write_text_atomic
 from skt_lib.learning.predictor import SktPredictor
-from skt_lib.planning.collision import MeshClearance
 from skt_lib.planning.skts import SktObject, load_probe_objects
 from stages._common import run_items
 from stages.rrt_skts import SWEEP_TOL_M
+from tools.object_sweeps import object_sweeper
 from tools.val_sim import validation_set
 
 OUT = Path("reports/train")
@@ -75,13 +73,10 @@ def sweep(task: SweepTask) -> dict:
     (support,) = read_obj(task.mesh)
     out = {name: [] for name, _ in task.paths}
     for o in task.objects:
-        mesh = read_obj(o.mesh)[0]
-        kp = np.asarray(o.keypoint, float).reshape(4, 4)
-        radius = float(np.linalg.norm(mesh.vertices - kp[:3, 3], axis=1).max())
-        checker = MeshClearance(support, mesh, task.spacing_m)
+        checker, along = object_sweeper(support, o, task.spacing_m, task.step_m)
         for name, positions in task.paths:
-            keypoint_poses = executed_path(positions, task.step_m, radius)
-            clearance, at = deepest(checker.per_pose(keypoint_poses @ invert(kp)))
+            keypoint_poses, object_poses = along(positions)
+            clearance, at = deepest(checker.per_pose(object_poses))
             i = round(at * (len(keypoint_poses) - 1))
             out[name].append({"object_id": o.object_id, "clearance_mm": 1000 * clearance,
                               "deepest_at": at,
