@@ -208,7 +208,8 @@ def table(data: dict) -> str:
     and its paper-preset extrapolation."""
     runs = sorted(data.get("runs", []), key=lambda r: r["n_supports"])
     if not runs:
-        return "Not measured yet: run `.venv/bin/python -m tools.scaling`."
+        return ("No sweep over support counts is recorded: run `.venv/bin/python -m tools.scaling "
+                "--supports N …`.")
     ns = [r["n_supports"] for r in runs]
     paper = extrapolate(data)
     lines = [f"Measured by `python -m tools.scaling` ({data['machine']}; commits "

@@ -82,7 +82,7 @@ def test_extrapolation_and_tables():
     assert ("| embedded default, fresh clone + `make repro` (set-up included) | 120 | 560 | "
             "28.3 min (measured at def) |") in scaling.presets_summary(data)
     assert f"≈ {sum(paper.values()) / 3600:.1f} h (**extrapolated**; `rrt_skts`" in summary
-    assert scaling.table({"runs": []}).startswith("Not measured")
+    assert scaling.table({"runs": []}).startswith("No sweep over support counts is recorded")
 
 
 def test_fresh_clones_and_runs_make_repro_with_set_up_timed(tmp_path, monkeypatch):
