@@ -115,7 +115,7 @@ seeds: $(STAMP)
 	@# evaluated on the same trials (reports/seeds/seed_runs.json), then sim_eval rerun to
 	@# merge them into Table I (reports/sim_eval: seeds.<method>.success_mean …), and the default
 	@# predictor against vatmart_mod over the seeds (reports/seeds/compare.json); needs an
-	@# up-to-date `make repro` (about 25 min on 2 cores)
+	@# up-to-date `make repro` (57 min on 2 cores at 9c25640)
 	@$(BIN)/dvc status --quiet train train_baselines || { echo "make seeds: the models are not up to date (dvc status train train_baselines): run make repro first" >&2; exit 2; }
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/python -m tools.seed_sweep
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro sim_eval
