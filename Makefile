@@ -61,8 +61,12 @@ repro: $(STAMP)
 	@# Table I and the other run figures of README.md and docs/ from the new reports
 	$(BIN)/python -m tools.docs_results
 
+# the suite on every core (pytest-xdist), at most four: each worker holds a tiny pipeline's
+# data, and some tests start two stage workers of their own; whole files per worker, so a
+# module's fixtures are built once
+TEST_WORKERS ?= $(shell n=$$(nproc); echo $$(( n < 4 ? n : 4 )))
 test: $(STAMP) browser-tools
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 browser-tools:
 	@# the Rerun web-viewer tests (tests/test_review.py) screenshot recordings in headless
