@@ -24,7 +24,11 @@ Two hands (``TrialTask.hand``):
 
 Sequence: start at ξ_{T-1} (set-up teleport, the only one) → follow every pose of
 :func:`skt_lib.geometry.skt.executed_path` to ξ_0 (no object point moves more than
-``step_m`` per command), checking the keypoint tracking error after every command → hold →
+``step_m`` per command), checking the keypoint tracking error after every command; the
+Panda's joints move within their velocity limits (the URDF's: 2.175 rad/s for joints 1–4,
+2.61 for 5–7): a command whose joint step would be faster over its ``steps_per_command``
+steps is preceded by sub-commands on the straight joint-space line from the one before, as
+many as that takes (a command within the limits runs as it is) → hold →
 release: constraint removed, fingers open, robot–object collisions on, retreat along the
 approach axis → perturb (the object at ``linear_damping``/``angular_damping``: PyBullet's
 default 0.04 in the committed params, as the anchors') → settle (at the ``settle_*`` damping:
@@ -229,7 +233,16 @@ def run_trial(task: TrialTask) -> dict:
             grip = _attach(world, robot.body, GRASP_LINK, obj, s.grasp_force_n)
             movers = {"object": obj, "robot": robot.body}
 
+            # joint motion per command at the Panda's velocity limits: a faster step is
+            # split into sub-commands along the straight joint-space line
+            per_command = robot.max_velocity * s.steps_per_command * s.dt
+
             def command(k: int) -> None:
+                n = 1 if k == 0 else int(np.ceil((np.abs(joints[k] - joints[k - 1])
+                                                  / per_command).max()))
+                for i in range(1, n):
+                    robot.command(joints[k - 1] + (joints[k] - joints[k - 1]) * (i / n))
+                    trace.step(s.steps_per_command, "approach")
                 robot.command(joints[k])
         else:
             grasp = task.grasps[0]

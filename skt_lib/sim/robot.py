@@ -98,6 +98,7 @@ class Panda:
         self.lower = np.array([i[8] for i in info])
         self.upper = np.array([i[9] for i in info])
         self.max_force = [i[10] for i in info]
+        self.max_velocity = np.array([i[11] for i in info])  # rad/s, the URDF's limits
         self.chain = Chain(PANDA_URDF, GRASP_LINK_NAME, base_world, compiled=compiled)
         self.mid = (self.lower + self.upper) / 2.0  # tracking drifts toward mid-range
         if not (np.array_equal(self.chain.lower, self.lower)

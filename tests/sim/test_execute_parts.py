@@ -593,3 +593,63 @@ def test_with_no_grasp_on_any_skt_the_row_gives_the_tasks_own_failure(scene):
     start_in = scenes.straight_skt(hang_s=0.03, length=0.02, offset=(0.0, 0.0, -0.009))
     far = scenes.straight_skt(offset=(0.0, 1.5, 0.0))
     assert detail(start_in, [far]) == detail(far) + "; nor on any of 1 further SKTs"
+
+
+def _approach_commands(monkeypatch, task):
+    """Run ``task`` (Panda); returns (the set-up's joint path, every arm command from the
+    grasp to the release, the row, the trace's approach steps)."""
+    calls, holding, chosen = [], [False], {}
+    command, fingers = Panda.command, Panda.command_fingers
+    attach, choose = execute._attach, execute.choose_grasp
+
+    def record(self, q):
+        if holding[0]:
+            calls.append(np.array(q, float))
+        command(self, q)
+
+    def grip(*args, **kwargs):
+        holding[0] = True
+        return attach(*args, **kwargs)
+
+    def release(self, width):  # the fingers open at the release
+        holding[0] = False
+        fingers(self, width)
+
+    def pick(*args, **kwargs):
+        chosen["c"] = choose(*args, **kwargs)
+        return chosen["c"]
+
+    monkeypatch.setattr(Panda, "command", record)
+    monkeypatch.setattr(Panda, "command_fingers", release)
+    monkeypatch.setattr(execute, "_attach", grip)
+    monkeypatch.setattr(execute, "choose_grasp", pick)
+    out = execute.run_trial(dataclasses.replace(task, record_every=1))
+    steps = sum(f["phase"] == "approach" for f in out["trace"])
+    return np.asarray(chosen["c"].joints), np.stack(calls), out["row"], steps
+
+
+@pytest.mark.parametrize("step_m", [0.002, 0.02])
+def test_the_arm_never_moves_a_joint_faster_than_its_limit(scene, monkeypatch, step_m):
+    """Every command of the approach is within the Panda's joint velocity limits (URDF) of the
+    one before, over ``steps_per_command`` steps: a faster step of the set-up's path is split
+    into sub-commands on the straight joint-space line, the path's own configurations among
+    them; where the path keeps within the limits it runs command for command as planned."""
+    task = scenes.ring_task(*scene, scenes.straight_skt(), "panda", step_m=step_m,
+                            steps_per_command=1)
+    joints, calls, row, steps = _approach_commands(monkeypatch, task)
+    s = task.settings
+    with World(s.dt, 50) as w:
+        limit = Panda(w, np.eye(4)).max_velocity * s.steps_per_command * s.dt
+    assert np.allclose(limit, [2.175 * s.dt] * 4 + [2.61 * s.dt] * 3)
+    assert row["success"], row
+    assert (np.abs(np.diff(calls, axis=0)) <= limit * (1 + 1e-12)).all()
+    assert np.array_equal(calls[0], joints[0])  # the arm starts where the set-up put it
+    # the planned configurations are commanded, in order, each one exactly
+    at = [next(i for i in range(len(calls)) if np.array_equal(calls[i], q)) for q in joints]
+    assert at == sorted(at) and at[-1] == len(calls) - 1
+    assert steps == len(calls) * s.steps_per_command
+    fast = (np.abs(np.diff(joints, axis=0)) > limit).any(axis=1).sum()
+    if step_m == 0.002:
+        assert fast == 0 and len(calls) == len(joints)  # nothing to split
+    else:
+        assert fast > 0 and len(calls) > len(joints)
