@@ -644,9 +644,15 @@ def test_the_arm_never_moves_a_joint_faster_than_its_limit(scene, monkeypatch, s
     assert row["success"], row
     assert (np.abs(np.diff(calls, axis=0)) <= limit * (1 + 1e-12)).all()
     assert np.array_equal(calls[0], joints[0])  # the arm starts where the set-up put it
-    # the planned configurations are commanded, in order, each one exactly
+    # the planned configurations are commanded, in order, each one exactly; between two,
+    # the fewest sub-commands that keep the limit, evenly on the straight joint-space line
     at = [next(i for i in range(len(calls)) if np.array_equal(calls[i], q)) for q in joints]
     assert at == sorted(at) and at[-1] == len(calls) - 1
+    for k in range(1, len(joints)):
+        n = at[k] - at[k - 1]
+        assert n == max(1, int(np.ceil((np.abs(joints[k] - joints[k - 1]) / limit).max())))
+        line = joints[k - 1] + np.outer(np.arange(1, n + 1) / n, joints[k] - joints[k - 1])
+        assert np.allclose(calls[at[k - 1] + 1:at[k] + 1], line, rtol=0, atol=1e-12)
     assert steps == len(calls) * s.steps_per_command
     fast = (np.abs(np.diff(joints, axis=0)) > limit).any(axis=1).sum()
     if step_m == 0.002:
