@@ -158,7 +158,8 @@ def _rows(rrd: Path) -> Counter:
 
 def test_rollout_trace_columns_are_the_per_step_logs(tmp_path):
     """The trace of a rollout, sent as columns, holds row for row what logging each recorded
-    step (robot links, object, keypoint trail, distance plot) would hold."""
+    step (robot links, object, keypoint trail, distance plot) would hold — the links only
+    while the arm is in the scene (it leaves after the retreat: ``links`` None)."""
     import numpy as np
     import rerun as rr
     from scipy.spatial.transform import Rotation
@@ -175,7 +176,8 @@ def test_rollout_trace_columns_are_the_per_step_logs(tmp_path):
         t[:3, 3] = rng.normal(size=3)
         return t
 
-    frames = [{"step": 3 * i, "links": {1: pose(), 4: pose()}, "object": pose()} for i in range(6)]
+    frames = [{"step": 3 * i, "links": {1: pose(), 4: pose()} if i < 4 else None,
+               "object": pose()} for i in range(6)]
     keypoint, skt = pose(), rng.normal(size=(5, 3))
     n, step, name = 2, 100, "world/trials/02"
     with recording("test", tmp_path / "columns.rrd", "t") as rec:
@@ -186,7 +188,7 @@ def test_rollout_trace_columns_are_the_per_step_logs(tmp_path):
         trail = []
         for f in frames:
             rec.set_time("step", sequence=step + f["step"])
-            for k in (1, 4):
+            for k in (1, 4) if f["links"] is not None else ():
                 t = World.to_support(f["links"][k])
                 rec.log(f"world/robot/link_{k}", _pose(t))
             t = f["object"]
@@ -196,7 +198,7 @@ def test_rollout_trace_columns_are_the_per_step_logs(tmp_path):
             rec.log("plots/keypoint_to_skt_mm/02",
                     rr.Scalars(1000 * distance_to_path(trail[-1], skt)))
     columns, steps = _rows(tmp_path / "columns.rrd"), _rows(tmp_path / "steps.rrd")
-    assert sum(columns.values()) == 6 * 5
+    assert sum(columns.values()) == 6 * 3 + 4 * 2
     assert columns == steps
 
 
@@ -220,9 +222,11 @@ def test_each_trial_plots_its_own_distance_series(tmp_path):
     assert plots == {"/plots/keypoint_to_skt_mm/00": {0}, "/plots/keypoint_to_skt_mm/01": {1}}
 
 
-def test_the_arm_is_hidden_in_a_trials_final_state_only(tmp_path):
-    """A Panda trial shows its arm at every recorded step but the last, the final state the
-    ``trial`` timeline shows (the arm hid the hang); a floating-hand trial never shows it."""
+def test_the_arm_is_hidden_from_when_it_leaves_the_scene(tmp_path):
+    """A Panda trial shows its arm until the first recorded step without it (it leaves after
+    the retreat), and the final state the ``trial`` timeline shows has none; a trial that
+    ends with the arm in the scene (blocked on the way in) shows it to the end; a
+    floating-hand trial never shows it."""
     from types import SimpleNamespace
 
     import numpy as np
@@ -233,14 +237,15 @@ def test_the_arm_is_hidden_in_a_trials_final_state_only(tmp_path):
     links = list(robot_meshes((0.15, 0.0, 0.3)))
     box = trimesh.creation.box((0.01, 0.01, 0.01))
     replay = []
-    for n, panda in enumerate((True, False)):
+    for n, (panda, leaves) in enumerate(((True, 3), (True, None), (False, None))):
         task = SimpleNamespace(trial_id=f"t{n}", method="oracle", support_id="s", object_id="o",
                                alternatives=(), positions=((0, 0, 0), (0.1, 0, 0)),
                                keypoint=tuple(np.eye(4).ravel()))
-        row = {"success": n == 1, "failure_reason": "" if n else "dropped", "difficulty": "easy",
+        row = {"success": n == 2, "failure_reason": "" if n == 2 else "dropped", "difficulty": "easy",
                "category": "mug", "grasp": "g", "max_track_err_m": 0.0, "detail": ""}
         frames = [{"step": 4 * i, "object": np.eye(4),
-                   "links": {k: np.eye(4) for k in links} if panda else None} for i in range(5)]
+                   "links": {k: np.eye(4) for k in links}
+                   if panda and (leaves is None or i < leaves) else None} for i in range(5)]
         replay.append((task, {"row": row, "trace": frames}))
     log_rollouts(tmp_path / "r.rrd", replay, {"s": box}, {"o": box}, (0.15, 0.0, 0.3))
     import ast
@@ -249,12 +254,13 @@ def test_the_arm_is_hidden_in_a_trials_final_state_only(tmp_path):
                      ast.literal_eval(dict(vals)["Transform3D:scale"])[0][0])
                     for (entity, times, vals), _ in _rows(tmp_path / "r.rrd").items()
                     if entity == "/world/robot")
-    # the failure (Panda) is replayed first: shown from its start, hidden (micrometre-sized:
-    # the viewer ignores a zero scale) at its last step 16; the floating-hand trial starts
-    # after it and the gap, hidden throughout
+    # the failures (Panda) are replayed first: the first shown from its start, hidden
+    # (micrometre-sized: the viewer ignores a zero scale) from its step 12, where the arm has
+    # left; the second shown throughout; the floating-hand trial, after them and the gaps,
+    # hidden throughout
     assert [(t, s, scale == 1.0 or scale < 1e-5) for t, s, scale in scales] == \
-        [(0, 0, True), (0, 16, True), (1, 66, True)], scales
-    assert [scale == 1.0 for *_, scale in scales] == [True, False, False], scales
+        [(0, 0, True), (0, 12, True), (1, 66, True), (2, 132, True)], scales
+    assert [scale == 1.0 for *_, scale in scales] == [True, False, True, False], scales
 
 
 def test_rrt_skts_recording_draws_at_most_eight_skts_per_support(tmp_path):

@@ -86,14 +86,14 @@ def _transforms(rec, entity: str, index: list, t: np.ndarray) -> None:
 def _log_trace(rec, name: str, n: int, step: int, frames: list, links, keypoint: np.ndarray,
                skt: np.ndarray) -> None:
     """Trial ``n``'s recorded steps (``frames``, from ``step`` on): robot links (``links``:
-    their indices, or ``None`` for the floating hand), object, keypoint trail, and the
-    keypoint's distance from ``skt`` — as columns, row for row what logging each step would
-    give."""
-    index = [rr.TimeColumn("trial", sequence=[n] * len(frames)),
-             rr.TimeColumn("step", sequence=[step + f["step"] for f in frames])]
-    for k in links or ():
-        _transforms(rec, f"world/robot/link_{k}", index,
-                    np.stack([World.to_support(f["links"][k]) for f in frames]))
+    their indices, or ``None`` for the floating hand; only in the frames that have them: the
+    arm leaves after the retreat), object, keypoint trail, and the keypoint's distance from
+    ``skt`` — as columns, row for row what logging each step would give."""
+    index = _index(n, step, frames)
+    arm = [f for f in frames if f["links"] is not None]
+    for k in (links or ()) if arm else ():
+        _transforms(rec, f"world/robot/link_{k}", _index(n, step, arm),
+                    np.stack([World.to_support(f["links"][k]) for f in arm]))
     _transforms(rec, f"{name}/object", index, np.stack([f["object"] for f in frames]))
     trail = np.stack([(f["object"] @ keypoint)[:3, 3] for f in frames])
     rec.send_columns(f"{name}/keypoint_trail", index, rr.LineStrips3D.columns(
@@ -101,6 +101,11 @@ def _log_trace(rec, name: str, n: int, step: int, frames: list, links, keypoint:
         radii=[_TRAIL_RADIUS] * len(trail)))
     rec.send_columns(f"plots/keypoint_to_skt_mm/{n:02d}", index, rr.Scalars.columns(
         scalars=[1000 * distance_to_path(p, skt) for p in trail]))
+
+
+def _index(n: int, step: int, frames: list) -> list:
+    return [rr.TimeColumn("trial", sequence=[n] * len(frames)),
+            rr.TimeColumn("step", sequence=[step + f["step"] for f in frames])]
 
 
 def distance_to_path(point: np.ndarray, path: np.ndarray) -> float:
@@ -150,7 +155,8 @@ def log_rollouts(path: Path, replay: list, support_meshes: dict, object_meshes: 
             if frames:
                 _log_trace(rec, name, n, step, frames, links if panda else None,
                            np.asarray(task.keypoint, dtype=np.float64).reshape(4, 4), skt)
-                if panda:  # the trial's final state without the arm, which hid the hang
-                    rec.set_time("step", sequence=step + frames[-1]["step"])
+                gone = next((f for f in frames if f["links"] is None), None)
+                if panda and gone is not None:  # the arm has left the scene (after the retreat)
+                    rec.set_time("step", sequence=step + gone["step"])
                     rec.log("world/robot", rr.Transform3D(scale=_HIDDEN))
             step += (frames[-1]["step"] if frames else 0) + _GAP

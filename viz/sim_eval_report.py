@@ -129,9 +129,9 @@ def write_report(rep: Path, trials: pd.DataFrame, pairs: pd.DataFrame, metrics: 
                 "`collided_before_hang`: the object or robot is blocked by the support or wall "
                 "on the way in; `not_reached`: released, never touched the support; `dropped`: "
                 "touched it, then fell; `not_at_rest`: on the support but still moving at the "
-                "end; `on_wall_plate`: resting on the wall plate only; `perched`: rests on top; "
-                "`touches_robot`: still on the gripper. `oracle_floating` has no arm: it cannot "
-                "fail by `ik_failed`.")
+                "end; `on_wall_plate`: resting on the wall plate only; `perched`: rests on top. "
+                "The arm leaves the scene after its retreat, so nothing ends on the gripper. "
+                "`oracle_floating` has no arm: it cannot fail by `ik_failed`.")
     report.heading("Per level (success % [Wilson 95 %] ‖ support-bootstrap 95 %, trials)")
     n_by_level = pairs.groupby(["method", "difficulty"]).size()
     report.table(["method", *LEVELS],

@@ -30,9 +30,11 @@ Panda's joints move within their velocity limits (the URDF's: 2.175 rad/s for jo
 steps is preceded by sub-commands on the straight joint-space line from the one before, as
 many as that takes (a command within the limits runs as it is) → hold →
 release: constraint removed, fingers open, robot–object collisions on, retreat along the
-approach axis → perturb (the object at ``linear_damping``/``angular_damping``: PyBullet's
-default 0.04 in the committed params, as the anchors') → settle (at the ``settle_*`` damping:
-an undamped hung object keeps swinging) → predicate.
+approach axis, then the arm is taken out of the scene (it would otherwise stand beside the
+hook, and its hand catch an object the perturbation swings off) → perturb (the object at
+``linear_damping``/``angular_damping``: PyBullet's default 0.04 in the committed params, as
+the anchors') → settle (at the ``settle_*`` damping: an undamped hung object keeps swinging)
+→ predicate.
 
 Three executors (``TrialSettings.executor``, :data:`EXECUTORS`) decide the same way and differ
 in the physics steps they skip where the verdict is already certain; ``make bench`` times
@@ -60,8 +62,10 @@ Outcomes (``failure_reason``, empty on success; :data:`REASONS`):
 - ``dropped``: it touched the support after the release, but ended off it (floor, or no contact);
 - ``not_at_rest``: on the support but still moving at the end (swinging, sliding off);
 - ``on_wall_plate``: resting only on the support's wall plate, not on its hanging part;
-- ``perched``: resting on top of the support (centre of mass above the supporting contact);
-- ``touches_robot``: still on or in the gripper.
+- ``perched``: resting on top of the support (centre of mass above the supporting contact).
+
+An object the retreating hand drags off the hook fails as ``dropped`` or ``not_reached``:
+the arm is gone before the perturbation, so none ends on the gripper.
 """
 
 from dataclasses import dataclass, field
@@ -77,15 +81,15 @@ from skt_lib.sim.robot import FINGER_OPEN_M, GRASP_LINK, Panda
 from skt_lib.sim.world import World
 
 REASONS = ("ik_failed", "collided_before_hang", "not_reached", "dropped", "not_at_rest",
-           "on_wall_plate", "perched", "touches_robot")
+           "on_wall_plate", "perched")
 HANDS = ("panda", "floating")
 #: The executors, slowest first: ``reference`` (numpy IK, the Panda's visual meshes, every
 #: physics step), ``fallen_exit`` (compiled IK, no visual meshes; ends a trial once the object
 #: has fallen for good) and ``rest_exit`` (also ends the settle once the object is at rest).
 EXECUTORS = ("reference", "fallen_exit", "rest_exit")
 #: predicate reason → trial reason; "touches_floor"/"no_contact" depend on a support touch
-_HANG_REASON = {"perched": "perched", "touches_robot": "touches_robot",
-                "not_at_rest": "not_at_rest", "on_wall_plate": "on_wall_plate"}
+_HANG_REASON = {"perched": "perched", "not_at_rest": "not_at_rest",
+                "on_wall_plate": "on_wall_plate"}
 
 
 @dataclass(frozen=True)
@@ -142,8 +146,8 @@ class TrialTask:
 
 
 class _Trace:
-    """Robot link poses (``None`` without a robot) and the object pose every ``every``
-    steps, with phase names."""
+    """Robot link poses (``None`` without a robot, and once the arm has left after the
+    retreat) and the object pose every ``every`` steps, with phase names."""
 
     def __init__(self, world: World, robot: Panda | None, obj: int, every: int):
         self.world, self.robot, self.obj, self.every = world, robot, obj, every
@@ -278,6 +282,10 @@ def run_trial(task: TrialTask) -> dict:
                 robot.command(robot.ik(back))
                 trace.step(1, "retreat")
                 row["touched_support"] |= bool(world.contacts(obj, support))
+            # the arm leaves the scene: left standing 8 cm away, its hand would catch an
+            # object swinging off the hook in the perturbation and hold it up (docs/evaluation.md)
+            pb.removeBody(robot.body, physicsClientId=world.cid)
+            robot = trace.robot = None
         else:
             anchor.remove()
             for _ in range(s.retreat_steps):
@@ -302,8 +310,7 @@ def run_trial(task: TrialTask) -> dict:
                 if rest is not None and rest():  # the rest of the settle would not move it
                     break
             row["touched_support"] |= bool(world.contacts(obj, support))
-        check = check_hang(world, obj, support, s.perturbation,
-                           None if robot is None else robot.body)
+        check = check_hang(world, obj, support, s.perturbation)  # no hand is left
         if check.ok:
             row["success"] = True
             return _end(row, "", trace)

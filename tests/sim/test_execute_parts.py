@@ -456,16 +456,32 @@ def test_tiny_trials_rows_and_phases_by_hand(scene):
     assert phases == {"approach": k * s.steps_per_command}
 
 
-def test_the_arm_lets_go_and_backs_off_along_its_approach(scene):
+def test_the_arm_lets_go_backs_off_along_its_approach_and_leaves(scene, monkeypatch):
     """After the hold, the gripper opens and retreats ``retreat_m`` straight back along its
-    approach axis (grasp-target z), without turning; the ring stays on the peg."""
+    approach axis (grasp-target z), without turning; then the arm leaves the scene, so the
+    perturbation and the predicate see support, wall and ring only (a hand left beside the
+    hook would catch a ring swung off it); the ring stays on the peg."""
+    import pybullet as pb
+
     from skt_lib.sim.robot import GRASP_LINK
 
+    seen = []
+
+    def spy(world, obj, support, p, *robot):
+        bodies = [pb.getBodyUniqueId(i, physicsClientId=world.cid)
+                  for i in range(pb.getNumBodies(physicsClientId=world.cid))]
+        seen.append((robot, {pb.getBodyInfo(b, physicsClientId=world.cid)[1].decode()
+                             for b in bodies}))
+        return check_hang(world, obj, support, p, *robot)
+
+    check_hang = execute.check_hang
+    monkeypatch.setattr(execute, "check_hang", spy)
     s = scenes.settings()
     task = dataclasses.replace(scenes.ring_task(*scene, scenes.straight_skt(), "panda"),
                                record_every=1)
     out = execute.run_trial(task)
     assert out["row"]["success"], out["row"]
+    assert seen == [((), {"", "object_reference", "test_support"})], seen
     by_phase = {}
     for f in out["trace"]:
         by_phase.setdefault(f["phase"], []).append(f)
@@ -473,11 +489,13 @@ def test_the_arm_lets_go_and_backs_off_along_its_approach(scene):
     assert np.allclose(base[:3, :3], np.eye(3), atol=1e-12)  # unturned, where put
     assert np.allclose(base[:2, 3], s.robot_base[:2], atol=1e-12)
     released = by_phase["hold"][-1]["links"][GRASP_LINK + 1]
-    for frame, least in ((by_phase["retreat"][-1], 0.07), (out["trace"][-1], 0.079)):
-        rel = np.linalg.inv(released) @ frame["links"][GRASP_LINK + 1]
-        assert -s.retreat_m - 1e-4 < rel[2, 3] < -least
-        assert np.linalg.norm(rel[:2, 3]) < 1e-3 and np.allclose(rel[:3, :3], np.eye(3), atol=1e-4)
+    rel = np.linalg.inv(released) @ by_phase["retreat"][-1]["links"][GRASP_LINK + 1]
+    assert -s.retreat_m - 1e-4 < rel[2, 3] < -0.07
+    assert np.linalg.norm(rel[:2, 3]) < 1e-3 and np.allclose(rel[:3, :3], np.eye(3), atol=1e-4)
     assert len(by_phase["retreat"]) == s.retreat_steps
+    assert all(f["links"] is not None for f in by_phase["retreat"])
+    after = by_phase["perturb"] + by_phase["settle"]
+    assert after and all(f["links"] is None for f in after)
 
 
 def test_a_trial_without_grasp_candidates_is_refused(scene):
