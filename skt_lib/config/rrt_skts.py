@@ -22,7 +22,7 @@ class RrtSktsParams(Section):
     max_release_offset_m: float = Field(ge=0.0, le=0.004, description="How far from the hang ξ_0 may be, lifted above it and/or moved back along the arrival (the object drops or slides in); ≤ 4 mm, so every SKT ends within 5 mm of the hang.")
     check_step_m: float = Field(gt=0.0, le=0.01, description="Largest probe-point motion between checked poses.")
     clearance_m: float = Field(ge=0.0, le=0.01, description="PyBullet distance the reference object keeps from support and wall.")
-    probe_train_objects: bool = Field(description="Plan with the training objects beside the reference (docs/pipeline.md, rrt_skts).")
+    probe_train_objects: bool | Literal["test"] = Field(description="Plan with the training objects beside the reference (docs/pipeline.md, rrt_skts): true on every support; \"test\" on test supports only, the first n_skts_per_support SKTs, the reference's others kept behind them.")
     penetration_tol_m: float = Field(ge=0.0, le=0.01, description="Deepest penetration allowed to a training object.")
     wall_train_objects: bool = Field(description="Keep every training object off the wall plane (its mesh's least x ≥ 0; exact and cheap, the wall is a plane) where the keypoint lies at least wall_from_m from the hang (docs/pipeline.md, rrt_skts).")
     wall_from_m: float = Field(ge=0.0, le=0.3, description="With wall_train_objects: the wall is checked for the training objects only this far from the hang and more (some cross it within millimetres of the reference's hang and settle off it).")

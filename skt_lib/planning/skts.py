@@ -243,7 +243,10 @@ def plan_support_skts(task: SktTask) -> dict:
     checks leave without an SKT (a tall tip no mug clears from the start region, a curl a long
     utensil cannot follow off the wall) are planned again for the reference alone
     (:func:`fill_failed`): ``n_reference_fill`` in the result counts them, and ``probe``
-    names the probe that planned the support's SKTs ("reference" where every one was)."""
+    names the probe that planned the support's SKTs ("reference" where every one was).
+    ``probe_train_objects: test`` plans a test support's first ``n_skts_per_support`` SKTs
+    with the training objects and keeps the reference's others behind them
+    (:func:`mixed_attempts`); supports of the other splits are planned for the reference."""
     p = task.params
     rng = item_rng(task.seed, "rrt_skts", task.support_id)
     ref_kp = _kp(task.reference)
@@ -269,9 +272,10 @@ def plan_support_skts(task: SktTask) -> dict:
         return k_goal + g.uniform(lo_off, hi_off)
 
     def attempts_with(world: World, obstacles: list[int], objs: tuple[SktObject, ...], wall,
-                      only: list[int] | None = None) -> list:
-        """The attempts (``only`` those, where the planner can) planned with ``objs`` in the
-        probe and ``wall`` points (:func:`wall_points`) kept off the wall."""
+                      only: list[int] | None = None, n: int | None = None) -> list:
+        """The attempts (``only`` those, where the planner can; ``n`` of them, default the
+        split's) planned with ``objs`` in the probe and ``wall`` points (:func:`wall_points`)
+        kept off the wall."""
         probe = add_probe(world, [ProbeObject(o.collision, o.keypoint) for o in objs])
         gated = len(objs) > 1 or wall is not None
         # the per-SKT planner is kept as it was, the reference: every obstacle at every pose
@@ -281,21 +285,38 @@ def plan_support_skts(task: SktTask) -> dict:
                                            k_goal if gated else None, p.train_objects_from_m, wall,
                                            p.wall_from_m, hull)
         settings = thread_settings(p, max(_radius(read_obj(o.mesh)[0], _kp(o)) for o in objs), task.T)
-        return list(_plan(task, goal, n_attempts(p, task.split), in_start, sample_start, lower, upper,
+        return list(_plan(task, goal, n_attempts(p, task.split) if n is None else n, in_start,
+                          sample_start, lower, upper,
                           collides, settings, rng, k_goal + (lo_off + hi_off) / 2,
                           (k_goal + lo_off, k_goal + hi_off), near, route, only))
 
-    objs = (task.reference, *(task.train_objects if p.probe_train_objects else ()))
+    mixed = p.probe_train_objects == "test" and task.split == "test"
+    objs = (task.reference,
+            *(task.train_objects if p.probe_train_objects is True or mixed else ()))
     wall = (wall_points([(read_obj(o.mesh)[0], _kp(o)) for o in task.train_objects])
             if p.wall_train_objects and task.train_objects else None)
     probe = "+".join(["objects" if len(objs) > 1 else "reference", *(["wall"] if wall is not None else [])])
     n_fill = 0
     with World(dt=1 / 240, solver_iterations=1, with_floor=False) as world:
         obstacles = [world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5), world.add_wall()]
-        attempts = attempts_with(world, obstacles, objs, wall)
-        failed = [a[0] for a in attempts if a[1] is None]
-        if probe != "reference" and failed:
-            attempts, n_fill = fill_failed(attempts, attempts_with(world, obstacles, objs[:1], None, failed))
+
+        def planned(objs: tuple[SktObject, ...]) -> tuple[list, int]:
+            attempts = attempts_with(world, obstacles, objs, wall)
+            failed = [a[0] for a in attempts if a[1] is None]
+            if (len(objs) > 1 or wall is not None) and failed:
+                return fill_failed(attempts, attempts_with(world, obstacles, objs[:1], None, failed))
+            return attempts, 0
+
+        if mixed:  # the reference's SKTs as without the objects (planned first: the same
+            # draws), then the objects' for the first n_skts_per_support in front of them
+            reference, n_fill = planned(objs[:1])
+            n = n_attempts(p, task.split)
+            attempts, n_objects_fill = mixed_attempts(
+                attempts_with(world, obstacles, objs, wall, n=min(p.n_skts_per_support, n)),
+                reference, n)
+            n_fill += n_objects_fill
+        else:
+            attempts, n_fill = planned(objs)
     out = _recheck(attempts, checker, ref_kp, ref_radius, p, task.T) | {
         "probe": "reference" if n_fill == len(attempts) else probe, "n_reference_fill": n_fill}
     skts, sweeps = out["skts"], []
@@ -325,6 +346,24 @@ def fill_failed(attempts: list, fallback: list) -> tuple[list, int]:
     filled = [(n + a[0], f[1], f[2], a[3] + f[3], a[4] + f[4])
               for a in attempts if a[1] is None for f in (by_index[a[0]],)]
     return kept + filled, len(filled)
+
+
+def mixed_attempts(with_objects: list, reference: list, n: int) -> tuple[list, int]:
+    """A test support's ``n`` attempts under ``probe_train_objects: test``: the ``m`` attempts
+    planned with the training objects as attempts 0 … m − 1, the reference's attempts m … n − 1
+    as they are (``reference``: all ``n``, a filled one as attempt n + i, as
+    :func:`fill_failed` gives them), and each objects' attempt *i* that found no path replaced
+    by the reference's attempt *i* as attempt ``n + i`` (after every other: the oracle tries
+    the objects' SKTs first, then the reference's); how many were replaced."""
+    m = len(with_objects)
+    by_attempt = {a[0] % n: a for a in reference}
+    if m > n or sorted(by_attempt) != list(range(n)) or len(reference) != n:
+        raise ValueError(f"mixed_attempts: {m} attempts with the objects, the reference's "
+                         f"{sorted(a[0] for a in reference)} of {n}")
+    kept = [a for a in with_objects if a[1] is not None]
+    filled = [(n + a[0], r[1], r[2], a[3] + r[3], a[4] + r[4])
+              for a in with_objects if a[1] is None for r in (by_attempt[a[0]],)]
+    return kept + [by_attempt[i] for i in range(m, n)] + filled, len(filled)
 
 
 def _recheck(attempts, checker: MeshClearance, ref_kp: np.ndarray, ref_radius: float,

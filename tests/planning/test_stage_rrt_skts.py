@@ -13,7 +13,7 @@ from skt_lib.geometry.se3 import invert, pose_matrix
 from skt_lib.io import read_table
 from skt_lib.planning.collision import MeshClearance
 from skt_lib.planning.skts import (REACH_TOL_M, SktObject, _kp, _radius, approach_start, fill_failed,
-                                   load_skt_tasks, plan_support_skts, sweep_clearance)
+                                   load_skt_tasks, mixed_attempts, plan_support_skts, sweep_clearance)
 from skt_lib.geometry.skt import executed_path, resample
 from skt_lib.schemas import CONTACTS, KEYPOINTS, OBJECTS, SKTS, SUPPORTS
 
@@ -170,3 +170,52 @@ def test_fill_failed_replaces_only_the_failed_attempts_and_keeps_their_cost():
     assert fill_failed(strict, fallback[1:]) == (got, 2)  # the failed attempts' are enough
     with pytest.raises(KeyError):
         fill_failed(strict, fallback[:2])  # attempt 2's is missing
+
+
+def test_mixed_attempts_put_the_objects_skts_first_and_the_references_behind():
+    path = np.zeros((3, 3))
+    objects = [(0, path, None, 1.0, 10), (1, None, "no_path", 2.0, 20)]
+    # the reference's attempt 3 was filled (planned off the wall alone): attempt 4 + 3
+    reference = [(i, path + i, None, 0.5, 5) for i in range(3)] + [(7, path + 3, None, 0.5, 5)]
+    got, n = mixed_attempts(objects, reference, 4)
+    assert n == 1
+    assert got[0] is objects[0]  # the objects' SKT keeps its index: the oracle's first
+    assert got[1:3] == [reference[2], reference[3]]  # the reference's beyond them, unchanged
+    # the objects' failed attempt 1 becomes the reference's attempt 1, as attempt 4 + 1
+    assert got[3][0] == 5 and got[3][1] is reference[1][1] and got[3][3:] == (2.5, 25)
+    assert sorted(a[0] for a in got) == [0, 2, 5, 7]  # no index twice
+    with pytest.raises(ValueError):  # the reference must hold every attempt
+        mixed_attempts(objects, reference[:3], 4)
+    with pytest.raises(ValueError):  # the objects plan no more attempts than there are
+        mixed_attempts(reference, objects, 2)
+
+
+def test_probe_on_test_supports_only_keeps_the_references_skts_behind_the_objects(tiny_dataset):
+    """``probe_train_objects: test``: a test support's first ``n_skts_per_support`` SKTs are
+    planned with the training objects, the rest are the reference's, byte for byte what
+    planning without the objects gives; supports of other splits are planned as without."""
+    params, data, _ = tiny_dataset
+    p = load_params(params)
+    base = p.rrt_skts.model_copy(update={"n_skts_per_support": 1, "n_skts_per_test_support": 2})
+    tasks = load_skt_tasks(data, p.common.seed, base, p.clustering.T)
+    test = next(t for t in tasks if t.split == "test")
+    other = next(t for t in tasks if t.split != "test")
+    mode = base.model_copy(update={"probe_train_objects": "test"})
+    for task in (test, other):
+        plain = plan_support_skts(task)
+        got = plan_support_skts(dataclasses.replace(task, params=mode))
+        if task is other:
+            assert got["probe"] == plain["probe"] and got["n_reference_fill"] == 0
+            assert [s["index"] for s in got["skts"]] == [s["index"] for s in plain["skts"]]
+            for a, b in zip(got["skts"], plain["skts"]):
+                np.testing.assert_array_equal(a["keypoints"], b["keypoints"])
+            continue
+        assert got["probe"].startswith("objects") and got["n_attempted"] == 2
+        by_index = {s["index"]: s for s in got["skts"]}
+        ref = {s["index"]: s for s in plain["skts"]}
+        assert 1 in ref  # the tiny support's second SKT exists without the objects
+        np.testing.assert_array_equal(by_index[1]["keypoints"], ref[1]["keypoints"])
+        if got["n_reference_fill"]:  # the objects' attempt failed: the reference's 0 as 2
+            np.testing.assert_array_equal(by_index[2]["keypoints"], ref[0]["keypoints"])
+        else:  # planned with the objects: not the reference's SKT 0
+            assert not np.array_equal(by_index[0]["keypoints"], ref[0]["keypoints"])
