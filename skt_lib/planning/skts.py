@@ -296,7 +296,6 @@ def plan_support_skts(task: SktTask) -> dict:
     wall = (wall_points([(read_obj(o.mesh)[0], _kp(o)) for o in task.train_objects])
             if p.wall_train_objects and task.train_objects else None)
     probe = "+".join(["objects" if len(objs) > 1 else "reference", *(["wall"] if wall is not None else [])])
-    n_fill = 0
     with World(dt=1 / 240, solver_iterations=1, with_floor=False) as world:
         obstacles = [world.load(task.support_urdf, np.eye(4), fixed=True, friction=0.5), world.add_wall()]
 
