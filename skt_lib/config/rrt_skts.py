@@ -11,7 +11,7 @@ class RrtSktsParams(Section):
     n_skts_per_support: int = Field(ge=1, le=500, description="Planned SKTs per support (paper: 50).")
     n_skts_per_test_support: int = Field(
         ge=1, le=500, description="Planned SKTs per test support: the oracles' stored choices in "
-        "sim_eval (≥ n_skts_per_support; the first ones are the same).")
+        "sim_eval (≥ n_skts_per_support; with probe_train_objects false the first ones are the ones any split gets).")
     planner: Literal["one_tree", "per_skt"] = Field(description="one_tree: every SKT of a support read out of one search grown from the hang, each to its own start (SKT 0 to the start region's centre); per_skt: today's reference, a fresh search per SKT, every SKT to the centre.")
     start_dx_m: tuple[float, float] = Field(description="Start keypoint offset range toward the robot.")
     start_dy_m: float = Field(ge=0.0, le=0.3, description="Start keypoint offset half-range along the wall.")

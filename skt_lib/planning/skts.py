@@ -183,8 +183,9 @@ def skt_diversity_m(keypoints: list[np.ndarray], T: int) -> float | None:
 
 def n_attempts(p: RrtSktsParams, split: str) -> int:
     """SKTs planned for a support of ``split``: more for test supports, whose stored SKTs are
-    the oracle's choices in ``sim_eval`` (the support's generator draws them in order, so the
-    first ``n_skts_per_support`` are the ones any split would get)."""
+    the oracle's choices in ``sim_eval`` (the support's generator draws them in order: without
+    the training objects the first ``n_skts_per_support`` are the ones any split would get;
+    with ``probe_train_objects: test`` they are planned with the objects too)."""
     return p.n_skts_per_test_support if split == "test" else p.n_skts_per_support
 
 
