@@ -6,6 +6,12 @@ SHELL := /bin/bash
 export OPENBLAS_CORETYPE ?= Haswell
 # ... on one thread per process: the stages run a process per core (skt_lib/__init__.py too)
 export OPENBLAS_NUM_THREADS ?= 1
+# numpy's and torch's own SIMD loops held at AVX2 on every x86-64 CPU (skt_lib.SIMD_PINS: an
+# AVX-512 CPU's loops round sin, arccos and sums otherwise, and planned other SKTs)
+ifeq ($(shell uname -m),x86_64)
+export NPY_DISABLE_CPU_FEATURES ?= X86_V4 AVX512_ICL AVX512_SPR
+export ATEN_CPU_CAPABILITY ?= avx2
+endif
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin

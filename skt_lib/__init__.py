@@ -30,21 +30,34 @@ BLAS_CORETYPE = "Haswell"
 BLAS_THREADS = "1"
 
 
+#: numpy's and torch's own SIMD loops, held at AVX2 on x86-64 whatever the CPU offers. Each
+#: picks its loops when it loads: numpy its AVX-512 ones (``X86_V4`` and up: SVML's sin, cos,
+#: arccos, exp round otherwise than the AVX2 build's), torch's ATen its AVX-512 kernels. On
+#: 2026-12-07 an AMD EPYC without AVX-512 planned other SKTs in ``rrt_skts`` than the
+#: committed run's AVX-512 machine from the same code, seed and inputs (docs/reproducibility.md).
+#: On a CPU without AVX-512 these change nothing (``rrt_skts`` and ``train`` rerun under them
+#: gave the same bytes there); with it they take that CPU's AVX2 paths. Not pinned: the
+#: libraries torch calls for products: ``MKL_CBWR=AVX2`` with ``ONEDNN_MAX_CPU_ISA=AVX2``
+#: changed the trained SCTDN even on that AVX2 machine (pinning them means retraining).
+SIMD_PINS = {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR",
+             "ATEN_CPU_CAPABILITY": "avx2"}
+
+
 def _pin_blas() -> None:
-    """Set ``OPENBLAS_CORETYPE`` and ``OPENBLAS_NUM_THREADS`` (each unless the environment
-    sets it) before numpy loads OpenBLAS, which reads them once. Importing ``skt_lib`` first
-    does it (``stages`` and the ``skt`` command do); where numpy came first, it is too late:
-    a warning says so."""
+    """Set ``OPENBLAS_CORETYPE``, ``OPENBLAS_NUM_THREADS`` and, on x86-64,
+    :data:`SIMD_PINS` (each unless the environment sets it) before numpy and torch load,
+    which read them once. Importing ``skt_lib`` first does it (``stages`` and the ``skt``
+    command do); where numpy came first, it is too late: a warning says so."""
     pins = {"OPENBLAS_NUM_THREADS": BLAS_THREADS}
     if _platform.machine().lower() in ("x86_64", "amd64"):
-        pins["OPENBLAS_CORETYPE"] = BLAS_CORETYPE
+        pins |= {"OPENBLAS_CORETYPE": BLAS_CORETYPE, **SIMD_PINS}
     pins = {k: v for k, v in pins.items() if k not in _os.environ}
     if not pins:
         return
     _os.environ.update(pins)
     if "numpy" in _sys.modules:
-        _warnings.warn("numpy was imported before skt_lib: its OpenBLAS kernel and thread "
-                       f"count are not ours ({pins}), so results may differ from other "
+        _warnings.warn("numpy was imported before skt_lib: its OpenBLAS kernel, thread "
+                       f"count and SIMD loops are not ours ({pins}), so results may differ from other "
                        f"machines' in the last bits and products run slower; set "
                        + " ".join(f"{k}={v}" for k, v in pins.items()) + " or import skt_lib first",
                        RuntimeWarning, stacklevel=2)

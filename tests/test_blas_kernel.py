@@ -60,3 +60,33 @@ def test_numpy_loaded_first_is_warned_about():
     out = _run("import numpy\nimport skt_lib")
     assert "numpy was imported before skt_lib" in out.stderr
     assert "numpy was imported before skt_lib" not in _run("import skt_lib\nimport numpy").stderr
+
+
+SIMD = """
+import os, numpy, torch
+from numpy._core._multiarray_umath import __cpu_features__ as f
+print(os.environ.get("NPY_DISABLE_CPU_FEATURES"), torch.backends.cpu.get_cpu_capability(),
+      any(f[k] for k in ("X86_V4", "AVX512_ICL", "AVX512_SPR")))
+"""
+
+
+def _simd_clean(code: str, **env) -> list[str]:
+    """``code``'s output (split) in a fresh interpreter whose environment has none of our
+    pins but ``env``."""
+    clean = {k: v for k, v in os.environ.items() if k not in skt_lib.SIMD_PINS
+             and k not in ("OPENBLAS_CORETYPE", "OPENBLAS_NUM_THREADS")}
+    return subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=clean | env,
+                          capture_output=True, text=True, check=True).stdout.split()
+
+
+def test_a_stage_process_runs_numpy_and_torch_on_their_avx2_paths():
+    """On an AVX-512 CPU numpy and torch would take their AVX-512 loops (other roundings:
+    other SKTs); a stage process takes the AVX2 ones on any x86-64 CPU with AVX2."""
+    out = _simd_clean("import stages" + SIMD)
+    disabled, torch_isa, avx512 = " ".join(out[:-2]), out[-2], out[-1]
+    assert disabled == skt_lib.SIMD_PINS["NPY_DISABLE_CPU_FEATURES"]
+    assert avx512 == "False"  # numpy: no AVX-512 loop is dispatched
+    assert torch_isa in ("AVX2", "DEFAULT")  # DEFAULT: a CPU without AVX2 at all
+    # an explicit setting wins, as for OpenBLAS
+    out = _simd_clean("import stages" + SIMD, ATEN_CPU_CAPABILITY="default")
+    assert out[-2] == "DEFAULT"
