@@ -116,10 +116,11 @@ def _reference(root: Path):
     return ref, reference, train
 
 
-def _hang_and_plan(args, params, paths, root: Path, candidates, arms, bar):
+def _hang_and_plan(args, params, paths, root: Path, candidates, arms, bar, plan):
     """(difficulty, arm index, hang, SKTs) on the first candidate arm where the reference
     object hangs as ``contact_sim`` drops it and an SKT planned as ``rrt_skts`` plans reaches
-    that hang; or :class:`MeshError` naming what each arm gave."""
+    that hang (``plan``: :func:`plan_support_skts`); or :class:`MeshError` naming what each
+    arm gave."""
     ref_row, reference, train = _reference(root)
     seed, tried = params.common.seed, []
     for diff, arm in candidates:
@@ -135,7 +136,7 @@ def _hang_and_plan(args, params, paths, root: Path, candidates, arms, bar):
                          "drops hung)")
             continue
         bar.update()
-        planned = plan_support_skts(SktTask(
+        planned = plan(SktTask(
             args.name, "user", str(paths["urdf"]), str(paths["mesh"]), reference, train, (),
             tuple(hang["hang_position"]), tuple(hang["hang_quat"]), seed, params.clustering.T,
             params.rrt_skts))
@@ -150,7 +151,10 @@ def _hang_and_plan(args, params, paths, root: Path, candidates, arms, bar):
     raise MeshError(f"{args.mesh}: " + "; ".join(tried))
 
 
-def import_support(args, params, bar) -> dict:
+def import_support(args, params, bar, plan=plan_support_skts) -> dict:
+    """The imported support's record (module notes); ``plan(task) -> planned`` plans an arm's
+    SKTs (:func:`plan_support_skts`; ``tools/route_room.py`` hands in its own, to measure
+    the task an arm gives the planner)."""
     name, seed, root = args.name, params.common.seed, Path(args.data_root)
     to_support = support_frame(args)
     solid = load_solid(args.mesh, args.units)
@@ -168,7 +172,7 @@ def import_support(args, params, bar) -> dict:
         iou = check_parts(read_obj(paths["collision"]), visual_back, f"{args.mesh} (written)",
                           min_iou=0.0)
         diff, arm, hang, planned, skts = _hang_and_plan(args, params, paths, root, candidates,
-                                                        arms, bar)
+                                                        arms, bar, plan)
         bar.update()
         render_support(RenderTask(name, str(paths["mesh"]), str(Path(tmp) / "views.npz"), seed,
                                   params.render_views))

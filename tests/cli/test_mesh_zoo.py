@@ -20,7 +20,9 @@ from skt_lib.geometry.simplify import MAX_FACES
 from tests.cli.conftest import tree_state
 
 #: "import" cases that do not import today, with what their error says: the pigtail's 330°
-#: curl defeats the threading planner (4 of 4 SKT attempts ``no_path``).
+#: curl defeats the threading planner (4 of 4 SKT attempts ``no_path``): along the curl's back
+#: the reference ring's body, kept outside the curl by an SKT's frames, meets the wall
+#: (``python -m tools.route_room``, docs/cli.md).
 KNOWN_MISSES = {
     "pigtail": "no SKT reaches the hang",
 }
