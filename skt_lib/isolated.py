@@ -12,8 +12,10 @@ dict of numpy arrays.
 """
 
 import ctypes
+import functools
 import importlib
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -31,11 +33,16 @@ class ChildFailed(SktError):
     """The isolated call did not return: aborted, crashed, raised, or ran out of time."""
 
 
-def _die_with_parent() -> None:  # pragma: no cover - runs in the child before exec
+def _die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the child before exec
+    """Ask for SIGKILL when the parent dies; and where ``parent`` (the caller's pid) died
+    already — between the fork and this call, a window a loaded machine widens — die now: the
+    pledge would name the new parent, who never dies, and the child would compute on."""
     try:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
     except OSError:
-        pass  # not Linux: the child may outlive a killed parent
+        return  # not Linux: the child may outlive a killed parent
+    if os.getppid() != parent:
+        os.kill(os.getpid(), signal.SIGKILL)
 
 
 def _last_line(text: str) -> str:
@@ -53,7 +60,8 @@ def call_isolated(target: str, arrays: dict[str, np.ndarray], options: dict | No
         try:
             proc = subprocess.run([sys.executable, "-m", "skt_lib.isolated", target, str(src),
                                    str(dst)], capture_output=True, text=True,
-                                  timeout=time_limit_s, preexec_fn=_die_with_parent)
+                                  timeout=time_limit_s,
+                                  preexec_fn=functools.partial(_die_with_parent, os.getpid()))
         except subprocess.TimeoutExpired:
             raise ChildFailed(f"no result within {time_limit_s:g} s (stopped)") from None
         if proc.returncode < 0:

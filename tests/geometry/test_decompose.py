@@ -123,3 +123,20 @@ def _state(pid: int) -> str:
             return f.read().rsplit(")", 1)[1].split()[0]
     except FileNotFoundError:
         return "gone"
+
+
+def test_a_child_whose_caller_died_before_its_pledge_dies_at_once():
+    """The race the pledge leaves open: the caller killed between the fork and the child's
+    PR_SET_PDEATHSIG. The child then finds another parent than its caller's pid and ends
+    itself rather than computing on (it cannot be signalled by a parent already gone)."""
+    import subprocess
+    import sys
+
+    code = ("import os\nfrom skt_lib.isolated import _die_with_parent\n"
+            "_die_with_parent({parent})\nprint('computing on')\n")
+    gone = subprocess.run([sys.executable, "-c", code.format(parent=1)], capture_output=True,
+                          text=True)  # pid 1 is not its parent: the caller is "gone"
+    assert gone.returncode == -signal.SIGKILL and "computing on" not in gone.stdout
+    alive = subprocess.run([sys.executable, "-c", code.format(parent=os.getpid())],
+                           capture_output=True, text=True)  # this process is its parent
+    assert alive.returncode == 0 and "computing on" in alive.stdout
