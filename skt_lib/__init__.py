@@ -57,8 +57,8 @@ def _pin_blas() -> None:
     _os.environ.update(pins)
     if "numpy" in _sys.modules:
         _warnings.warn("numpy was imported before skt_lib: its OpenBLAS kernel, thread "
-                       f"count and SIMD loops are not ours ({pins}), so results may differ from other "
-                       f"machines' in the last bits and products run slower; set "
+                       f"count and SIMD loops are not ours ({pins}), so results may differ "
+                       f"from other machines' in the last bits and products run slower; set "
                        + " ".join(f"{k}={v}" for k, v in pins.items()) + " or import skt_lib first",
                        RuntimeWarning, stacklevel=2)
 

@@ -188,7 +188,8 @@ def release_room(task: SktTask, check: MeshClearance) -> dict:
                 if p0[2] < hang[2] - 1e-12:
                     continue
                 lead = p0 - np.outer(np.linspace(0.0, p.lead_in_m, 4), d)
-                value = check.per_pose(np.stack([frame(x, r0) for x in lead]) @ invert(keypoint)).min()
+                poses = np.stack([frame(x, r0) for x in lead]) @ invert(keypoint)
+                value = check.per_pose(poses).min()
                 candidates += 1
                 exact += int(value >= p.clearance_m)
                 probe += int(not any(collides(x, q) for x in lead))
@@ -249,7 +250,8 @@ def write_reports(rooms: dict[str, tuple[RouteRoom, dict]], out: Path) -> None:
     import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / "route_room.json", {k: r.as_json() | rel for k, (r, rel) in rooms.items()})
+    write_json_atomic(out / "route_room.json",
+                      {k: r.as_json() | rel for k, (r, rel) in rooms.items()})
     fig, axes = plt.subplots(1, len(rooms), figsize=(6 * len(rooms), 3.6), squeeze=False)
     need = next(iter(rooms.values()))[0].need_m
     lines = ["# Room along a curl (`python -m tools.route_room`)", "",
