@@ -13,11 +13,11 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
   ``render_total_ms_per_view_median``: the whole view (ray casting, FPS to N, shuffle,
   NPZ write share), over the same sample of supports, one process;
 - ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded;
-- ``skt_flow_inference_ms_median``: skt_flow, batch 1, points in → ``sim_eval.n_proposals``
-  samples ordered by the cloud check, the first moved clear of the points (the SKT it
-  executes), model loaded;
+- ``skt_flow_inference_ms_median``: skt_flow, batch 1, points in → ``sim_eval.flow_samples``
+  samples, each moved clear of the points, ordered by the training objects carried along
+  them (the first: the SKT it executes), model and probes loaded;
 - ``cli_predict_ms_median``: ``skt predict``'s prediction of a 1000-point view with its
-  default model (cleaning, sampling, skt_flow's 10 samples, the cloud check and the move),
+  default model (cleaning, sampling, skt_flow's 30 samples, the move and the probes' order),
   model loaded, process start excluded;
 - ``sim_trials_per_min``: sim_eval trials (Panda; the oracle's and SCTDN's SKTs, every test
   object) per minute of wall time on ``compute.n_workers`` workers, over ``per_level`` test
@@ -122,7 +122,7 @@ def main(argv=None) -> int:
     measure = {
         "rrt": lambda: rrt_bench(params, root, args.rrt_per_level, args.rrt_skts),
         "sctdn": lambda: sctdn_bench(root), "cli": lambda: cli_bench(root),
-        "flow": lambda: flow_bench(root, params.sim_eval.n_proposals, params.common.seed,
+        "flow": lambda: flow_bench(root, params.sim_eval.flow_samples, params.common.seed,
                                    params.sim_eval.flow_contacts),
         "sim": lambda: sim_bench(params, root, args.per_level),
         "render": lambda: _in_tmp(lambda tmp: render_bench(params, root, args.per_level, tmp)),

@@ -28,6 +28,7 @@ from skt_lib.coverage import multimodality_coverage
 from skt_lib.errors import DataError
 from skt_lib.eval.methods import MODEL_OF, load_models, method_for
 from skt_lib.eval.metrics import sim_metrics
+from skt_lib.eval.probe_check import load_probes
 from skt_lib.eval.protocol import (
     load_test_set,
     per_pair,
@@ -66,10 +67,12 @@ def main(argv=None) -> int:
         raise DataError(f"{root}: no test supports with a ground-truth SKT or no test objects")
     models = load_models(root, p.methods, T)
     omni_points = reference_points(root) if "omnihang" in p.methods else None
+    probes = load_probes(root) if "skt_flow" in p.methods else None
     seed = params.common.seed
     extra_s, extra_o, user_md5 = load_user_items(root, params)
     positions, seconds, made, fallbacks = predict_all(
-        {m: (lambda s, m=m: method_for(m, s.support_id, s.gt, params, models, omni_points))
+        {m: (lambda s, m=m: method_for(m, s.support_id, s.gt, params, models, omni_points,
+                                                   probes=probes))
          for m in p.methods}, [*supports, *extra_s])
     fallbacks = {key: f[:p.setup_fallbacks] for key, f in fallbacks.items()}
     settings = trial_settings(p, params.contact_sim)

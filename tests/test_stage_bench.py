@@ -13,7 +13,7 @@ def test_bench_json_is_written_fresh(monkeypatch, tmp_path):
     out.write_text(json.dumps({"stale_key": 1.0, "rrt_plan_s_median": 99.0}))
     monkeypatch.setattr(bench, "load_params", lambda _: SimpleNamespace(
         compute=SimpleNamespace(n_workers=2), common=SimpleNamespace(seed=0),
-        sim_eval=SimpleNamespace(n_proposals=10, flow_contacts=3)))
+        sim_eval=SimpleNamespace(n_proposals=10, flow_contacts=3, flow_samples=30)))
     monkeypatch.setattr(bench, "rrt_bench", lambda *a: {"rrt_plan_s_median": 1.0})
     monkeypatch.setattr(bench, "sctdn_bench", lambda *a: {"sctdn_inference_ms_median": 2.0})
     monkeypatch.setattr(bench, "flow_bench", lambda *a: {"skt_flow_inference_ms_median": 7.0})

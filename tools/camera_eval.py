@@ -46,6 +46,7 @@ from skt_lib.cli.predict import DEFAULT_MODEL, camera_cloud, model_cloud
 from skt_lib.config.params_file import load_params
 from skt_lib.errors import DataError, InputError
 from skt_lib.eval.methods import LEARNED, PROPOSING, load_models, method_for, model_dir
+from skt_lib.eval.probe_check import load_probes
 from skt_lib.eval.protocol import SINGLE, load_test_set, make_task, trial_settings
 from skt_lib.eval.seeds import models_key
 from skt_lib.geometry.export import read_obj
@@ -171,10 +172,11 @@ def seed_models(root: Path, repo: Path, method: str) -> dict[str, Path]:
     return out
 
 
-def predict_views(views, params, models: dict, n_fb: int) -> list[dict]:
+def predict_views(views, params, models: dict, n_fb: int, probes=None) -> list[dict]:
     """One case per (row's model, view, mode): ``{"label", "method", "view_index", "mode",
     "proposals": [positions (T, 3) in the true support frame, …], "fallbacks"}``. ``models``:
-    ``{label: (method, load_models' dict)}``."""
+    ``{label: (method, load_models' dict)}``; ``probes``: the training objects skt_flow orders
+    its samples by (:func:`~skt_lib.eval.probe_check.load_probes`)."""
     cases = []
     for label, (method, loaded) in models.items():
         for i, v in enumerate(tqdm(views, desc=f"predict {label}", unit="view",
@@ -186,7 +188,7 @@ def predict_views(views, params, models: dict, n_fb: int) -> list[dict]:
                 if mode not in v["ready"]:
                     continue
                 cloud, est = v["ready"][mode]
-                made = method_for(method, s.support_id, None, params, loaded)
+                made = method_for(method, s.support_id, None, params, loaded, probes=probes)
                 skts = made.propose(cloud) if hasattr(made, "propose") else [made.predict(cloud)]
                 to_true = v["pose"] @ invert(est)  # what a robot given that frame executes
                 fallbacks = () if len(skts) > 1 else skts[0].fallbacks[:n_fb]  # as sim_eval
@@ -300,7 +302,9 @@ def main(argv=None) -> int:
                         f"{sorted({(c.n_points, tuple(c.centres)) for c in cfgs})}")
     cfg = cfgs[0]
     views = evaluate_views(args, params, cfg)
-    cases = predict_views(views, params, models, params.sim_eval.setup_fallbacks)
+    probes = load_probes(args.data_root) if any(
+        m == "skt_flow" for m, _ in models.values()) else None
+    cases = predict_views(views, params, models, params.sim_eval.setup_fallbacks, probes)
     trials = run_hangs(views, cases, params)
     rows = row_tables(trials)
     from tools.camera_report import summarize, write_report  # it reads this module's constants

@@ -54,9 +54,10 @@ BENCH_ROWS = {
     "sctdn_inference_ms_median": ("{:.1f} ms", "SCTDN, batch 1, one rendered view in → SKT out, "
                                                "model loaded; median of 100 after 10 warm-up"),
     "skt_flow_inference_ms_median": ("{:.1f} ms", "skt_flow, batch 1, one rendered view in → "
-                                                  "its `sim_eval.n_proposals` samples ordered by "
-                                                  "the cloud check, the first moved clear of "
-                                                  "the points (the SKT it runs), model loaded; "
+                                                  "its `sim_eval.flow_samples` samples, each "
+                                                  "moved clear of the points and ordered by the "
+                                                  "training objects carried along them (the "
+                                                  "first: the SKT it runs), model loaded; "
                                                   "median of 100 after 10 warm-up"),
     "cli_predict_ms_median": ("{:.0f} ms", "`skt predict`'s prediction of a 1000-point view: "
                                            "cleaning, sampling, skt_flow (the default "

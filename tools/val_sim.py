@@ -31,6 +31,7 @@ from skt_lib.config import LEVELS
 from skt_lib.config.params_file import load_params
 from skt_lib.eval.methods import FALLS_BACK_TO_STORED, MODEL_OF, PREDICTOR_OF, Proposals, \
     load_models, make_method
+from skt_lib.eval.probe_check import load_probes
 from skt_lib.eval.protocol import load_test_set, per_pair, predict_all, success_table, \
     trial_settings
 from skt_lib.eval.rounds import run_rounds
@@ -112,6 +113,12 @@ def main(argv=None) -> int:
     ap.add_argument("--no-clear", action="store_true",
                     help="run skt_flow's samples as drawn, not moved clear of the cloud "
                          "(skt_lib/eval/clear_shift.py): what the move gains")
+    ap.add_argument("--no-probes", action="store_true",
+                    help="order skt_flow's samples by the cloud check alone, not by the "
+                         "training objects carried along them (skt_lib/eval/probe_check.py)")
+    ap.add_argument("--flow-samples", type=int, default=None, metavar="N",
+                    help="skt_flow draws N samples for the training objects to order, not "
+                         "sim_eval.flow_samples (at least sim_eval.n_proposals)")
     ap.add_argument("--flow-contacts", type=int, default=None, metavar="K",
                     help="skt_flow's samples from K contact hypotheses, not "
                          "sim_eval.flow_contacts (skt_lib/eval/contact_hypotheses.py; 1: the "
@@ -126,6 +133,11 @@ def main(argv=None) -> int:
         p = p.model_copy(update={"grasp_sphere_directions": args.grasp_sphere})
     if args.flow_contacts is not None:
         p = p.model_copy(update={"flow_contacts": args.flow_contacts})
+    if args.flow_samples is not None:
+        if args.flow_samples < p.n_proposals:
+            ap.error(f"--flow-samples: at least sim_eval.n_proposals ({p.n_proposals}), got "
+                     f"{args.flow_samples}")
+        p = p.model_copy(update={"flow_samples": args.flow_samples})
     supports, objects, missing = validation_set(args.data_root, T, seed, p)
     models = load_models(args.data_root, args.methods, T)
     for name, directory in args.model:
@@ -136,11 +148,14 @@ def main(argv=None) -> int:
         models = {name: with_readout(m, **readout) if isinstance(m, SktPredictor) else m
                   for name, m in models.items()}
     pre = np.asarray(p.kpam_pre_hang_m, float)
+    probes = None if args.no_probes or "skt_flow" not in args.methods else \
+        load_probes(args.data_root)
 
     def make(m: str, s):
         made = make_method(m, models.get(MODEL_OF.get(m)), s.gt, pre, p.kpam_lift_m,
                            rng=item_rng(seed, f"val_sim/{m}", s.support_id),
-                           n_proposals=p.n_proposals, flow_contacts=p.flow_contacts)
+                           n_proposals=p.n_proposals, flow_contacts=p.flow_contacts,
+                           probes=probes, flow_samples=p.flow_samples)
         if args.no_clear and isinstance(made, Proposals):
             made.clear = False
         return made
@@ -158,7 +173,10 @@ def main(argv=None) -> int:
     out = {"supports": len(supports), "supports_without_skt": missing, "objects": len(objects),
            "models": {name: str(d) for name, d in args.model}, "hang_taper": args.hang_taper,
            "check_families": args.check_families, "setup_fallbacks": n_fallbacks,
-           "skt_flow_moved_clear": not args.no_clear, "flow_contacts": p.flow_contacts,
+           "skt_flow_moved_clear": not args.no_clear,
+           "skt_flow_probes": probes is not None,
+           "skt_flow_samples": p.flow_samples if probes is not None else p.n_proposals,
+           "flow_contacts": p.flow_contacts,
            "robot_base_m": list(p.robot_base_m),
            "grasp_sphere_directions": p.grasp_sphere_directions,
            "methods": {m: {"success": table[m], "success_ci95": ci[m],

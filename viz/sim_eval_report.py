@@ -34,7 +34,7 @@ PAPER_ABLATION = (("template + contact point", "template_only", 58.2),
                   ("+ contact-point feature, deformation", "sctdn_cp_feature", 73.5),
                   ("+ shape-conditioned feature, deformation (SCTDN)", "sctdn", 83.7))
 #: The label of a proposing method's single-SKT row where it is not its first proposal.
-SINGLE_LABEL = {"skt_flow": "one SKT (the cloud check's pick of its samples)"}
+SINGLE_LABEL = {"skt_flow": "one SKT (the training objects' pick of its samples)"}
 
 
 
@@ -96,8 +96,9 @@ def write_report(rep: Path, trials: pd.DataFrame, pairs: pd.DataFrame, metrics: 
                 "keypoint / hanging pose). `vatmart*` and `skt_flow` rows count a (support, object) "
                 "pair as hung if any of its proposals hung it, as the paper did; the 'first "
                 "proposal only' rows are the honest single-sample rate, and `skt_flow`'s 'one "
-                "SKT' row executes the one sample the cloud check on the observed points ranks "
-                "first. "
+                "SKT' row executes the one of its samples (each moved clear of the observed "
+                "points) that the training objects, carried along them, bring least often near "
+                "those points; its best of N runs the first N in that order. "
                 "Brackets: Wilson 95 % score interval of the rate, as if every pair were "
                 "independent; after ‖: the 95 % interval from a bootstrap over test supports "
                 f"({len(supports)} in all, {len(supports) // len(LEVELS)} per level; a support's "

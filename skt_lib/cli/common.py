@@ -117,8 +117,11 @@ def load_predictor(model_dir: str | Path, n_samples: int | None = None,
                    seed: int = 0) -> "SktPredictor | FlowReadout":
     """The one-SKT predictor in ``model_dir``: an ``skt_flow`` folder (``skt_flow.json``,
     as ``train_baselines`` writes it) gives a :class:`~skt_lib.cli.flow_readout.FlowReadout`
-    (``n_samples`` samples, its default where None; noise seeded with ``seed``), any other
-    an SCTDN :class:`~skt_lib.learning.predictor.SktPredictor` (``train``'s folder)."""
+    (``n_samples`` samples, its default where None; noise seeded with ``seed``; its samples
+    ordered by the training objects of the data root the folder lies in,
+    ``<root>/train_baselines/skt_flow``, where that root holds them, else by the cloud
+    check), any other an SCTDN :class:`~skt_lib.learning.predictor.SktPredictor`
+    (``train``'s folder)."""
     # PyTorch: only where a model is loaded
     from skt_lib.cli.flow_readout import N_SAMPLES, FlowReadout
     from skt_lib.learning.predictor import SktPredictor
@@ -129,13 +132,26 @@ def load_predictor(model_dir: str | Path, n_samples: int | None = None,
                          "data/train_baselines/skt_flow and SCTDN into data/train)")
     try:
         if (d / "skt_flow.json").is_file():
-            return FlowReadout.load(d, N_SAMPLES if n_samples is None else n_samples, seed)
+            return FlowReadout.load(d, N_SAMPLES if n_samples is None else n_samples, seed,
+                                    probes=_probes_beside(d))
         if n_samples is not None:
             raise InputError(f"--samples goes with an skt_flow model; {d} holds no "
                              "skt_flow.json")
         return SktPredictor.load(d)
     except DataError as err:
         raise InputError(str(err)) from None
+
+
+def _probes_beside(model_dir: Path):
+    """The training objects of the data root ``model_dir`` was trained in (two folders up)
+    as :mod:`skt_lib.eval.probe_check`'s probes; None where that root does not hold them."""
+    from skt_lib.eval.probe_check import load_probes
+
+    root = model_dir.resolve().parents[1] if len(model_dir.resolve().parents) > 1 else None
+    if root is None or not all((root / f).is_file() for f in (
+            "mesh_gen/objects.parquet", "rotation_extraction/keypoints.parquet")):
+        return None
+    return load_probes(root)
 
 
 @contextmanager

@@ -23,6 +23,7 @@ from skt_lib.config.params_file import load_params
 from skt_lib.config.sim_eval import METHODS
 from skt_lib.errors import InputError
 from skt_lib.eval.methods import MODEL_OF, PRIVILEGED, PROPOSING, load_model, method_for, model_dir
+from skt_lib.eval.probe_check import load_probes
 from skt_lib.eval.protocol import make_task, reference_points, trial_settings
 from skt_lib.items import USER, find_object, find_support, user_dir
 from skt_lib.sim.execute import run_trial
@@ -82,18 +83,20 @@ def load_method_model(method: str, model: Path | None, root: Path, T: int):
 
 
 def hang(support, obj, method: str, params, model=None, record_every: int = 0,
-         proposals: int = 1, omni_points=None) -> dict:
+         proposals: int = 1, omni_points=None, probes=None) -> dict:
     """Predict with ``method`` on the support's view and run its trial: ``run_trial``'s result
     (``row`` of schema ``trials``, and a trace when ``record_every > 0``) of the last trial run,
     with its ``task``, ``method`` (the built method; omnihang's plan in ``.last``) and
     ``tried`` (trials run). A proposing method runs up to ``proposals`` of its proposals in
     order, stopping at the first that hangs, as ``sim_eval``'s rounds do; ``model``:
-    :func:`load_method_model`'s; ``omni_points``: the reference object's samples (omnihang)."""
+    :func:`load_method_model`'s; ``omni_points``: the reference object's samples (omnihang);
+    ``probes``: the training objects skt_flow orders its samples by
+    (:func:`~skt_lib.eval.probe_check.load_probes`)."""
     p = params.sim_eval
     proposing = method in PROPOSING
     m = method_for(method, support.support_id, support.gt, params,
                    {MODEL_OF[method]: model} if model is not None else {}, omni_points,
-                   max(proposals, p.n_proposals) if proposing else None)
+                   max(proposals, p.n_proposals) if proposing else None, probes)
     skts = m.propose(support.cloud) if proposing else [m.predict(support.cloud)]
     # sim_eval's fallbacks (protocol.predict_all): only for a method with one SKT
     fallbacks = () if len(skts) > 1 else skts[0].fallbacks[:p.setup_fallbacks]
@@ -183,10 +186,11 @@ def _run(args, params, root: Path, model) -> int:
         support = find_support(args.support, root, params, gt_for=gt_for)
         obj = find_object(args.object, root, params)
         omni = reference_points(root) if args.method == "omnihang" else None
+        probes = load_probes(root) if args.method == "skt_flow" else None
         bar.update()
         t0 = time.perf_counter()
         every = params.sim_eval.record_every if args.rrd else 0
-        out = hang(support, obj, args.method, params, model, every, n, omni)
+        out = hang(support, obj, args.method, params, model, every, n, omni, probes)
         bar.update()
         if args.rrd:
             from skt_lib.cli.rrd import log_hang

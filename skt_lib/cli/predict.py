@@ -1,8 +1,8 @@
 """``skt predict CLOUD``: the SKT of a user's partial cloud of a supporting item.
 
 The model is SCTDN (``train``'s folder) or ``skt_flow`` (``train_baselines``' folder: its
-samples ordered by the cloud check, the first one; :mod:`skt_lib.cli.flow_readout`), told
-apart by the folder's config file.
+samples moved clear of the cloud and ordered by the training objects carried along them,
+the first one; :mod:`skt_lib.cli.flow_readout`), told apart by the folder's config file.
 
 The cloud is scaled to metres (``--units``), moved into the support frame (``--frame``, or
 ``--camera``: the frame found from the wall in view, :mod:`skt_lib.perception.wall_frame`),
@@ -208,14 +208,15 @@ def add_parser(sub) -> None:
     ap.add_argument("--seed", type=int, default=0,
                     help="seed of the sampling to N points (and of skt_flow's noise)")
     ap.add_argument("--samples", type=count_arg, metavar="N",
-                    help=f"skt_flow models only: samples drawn, the clearest by the cloud check "
-                         f"is the SKT (default {N_SAMPLES}, as Table I's skt_flow row)")
+                    help=f"skt_flow models only: samples drawn, each moved clear of the cloud; "
+                         f"the first by the training objects carried along them is the SKT "
+                         f"(default {N_SAMPLES}, as Table I's skt_flow row)")
     ap.set_defaults(run=run)
 
 
 def _references(predictor, pred: Prediction) -> dict[str, np.ndarray]:
     """What the recording shows beside the SKT: SCTDN's family template, aligned at the
-    contact; skt_flow's other samples, clearest first."""
+    contact; skt_flow's other samples, in the read-out's order."""
     if isinstance(predictor, FlowReadout):
         return {f"samples/{i}": p for i, p in enumerate(pred.skt.fallbacks, start=1)}
     return {"template": predictor.predict(pred.points, deform=False).positions}
@@ -257,7 +258,9 @@ def run(args) -> int:
     c = np.round(pred.skt.contact, 4).tolist()
     chosen = (f"family {pred.skt.family} (probability {pred.skt.family_probability:.2f})"
               if kind == "sctdn" else
-              f"the clearest of {predictor.n_samples} skt_flow samples, moved clear of the cloud")
+              f"the first of {predictor.n_samples} skt_flow samples, moved clear of the cloud, "
+              + ("by the training objects carried along them" if predictor.probes is not None
+                 else "by the cloud check (no training objects beside the model)"))
     print(f"{args.output}: SKT of {record['T']} waypoints, {chosen}, contact {c} m "
           f"(cleaning kept {len(pred.points)} of {pred.counts['n_in']} points: "
           f"{pred.counts['non_finite']} non-finite, {pred.counts['outliers']} outliers, "

@@ -19,6 +19,8 @@ class SimEvalParams(Section):
     n_proposals: Proposals
     flow_contacts: int = Field(
         ge=1, le=10, description="skt_flow: its samples start from this many contact hypotheses, the affordance's argmax and the next most afforded points 1 cm apart (skt_lib/eval/contact_hypotheses.py); 1: the argmax alone.")
+    flow_samples: int = Field(
+        ge=1, le=200, description="skt_flow: samples drawn per support, each moved clear of the cloud and ordered by the training objects carried along them (skt_lib/eval/probe_check.py); its n_proposals proposals are the first of them, its one SKT the very first; at least n_proposals.")
     omnihang_max_checks: int = Field(ge=100, le=10_000_000, description="omnihang: RRT-Connect budget per support, in collision checks (deterministic, unlike a time limit; a failed plan falls back to the straight approach).")
     robot_base_m: tuple[float, float, float] = Field(description="World position of the Panda base, m.")
     linear_damping: LinearDamping
@@ -69,4 +71,8 @@ class SimEvalParams(Section):
             values = getattr(self, key)
             if len(set(values)) != len(values):
                 raise ValueError(f"{key}: duplicate entries in {list(values)}")
+        if self.flow_samples < self.n_proposals:
+            raise ValueError(f"flow_samples: skt_flow's {self.n_proposals} proposals (n_proposals) "
+                             f"are the first of its samples; need at least as many, got "
+                             f"{self.flow_samples}")
         return self

@@ -17,10 +17,11 @@
   the first of them (the honest single-sample rate).
 - ``skt_flow``: conditional flow-matching samples (``train_baselines``,
   :mod:`skt_lib.learning.flow`) from ``sim_eval.flow_contacts`` contact hypotheses
-  (:mod:`skt_lib.eval.contact_hypotheses`) ordered by the cloud check on the observed
-  points, each then moved clear of them (:mod:`skt_lib.eval.clear_shift`); ``predict``
-  gives the clearest, the one SKT its single-SKT row executes, ``propose`` all
-  ``n_proposals`` (its best-of-N row, as VAT-Mart's).
+  (:mod:`skt_lib.eval.contact_hypotheses`), each moved clear of the observed points
+  (:mod:`skt_lib.eval.clear_shift`), then ordered by the training objects carried along
+  them against those points (:mod:`skt_lib.eval.probe_check`); ``predict`` gives the
+  first, the one SKT its single-SKT row executes, ``propose`` all ``n_proposals`` (its
+  best-of-N row, as VAT-Mart's).
 - ``omnihang``: OMPL RRT-Connect to the ground-truth hanging pose (privileged), collision
   checked against the partial cloud only (:mod:`skt_lib.eval.omnihang`).
 
@@ -37,6 +38,7 @@ from skt_lib.errors import DataError
 from skt_lib.eval import contact_hypotheses
 from skt_lib.eval.contact_hypotheses import ContactHypotheses
 from skt_lib.eval.clear_shift import shifted
+from skt_lib.eval.probe_check import ProbeSet, ordered
 from skt_lib.geometry.skt import skt_frames
 from skt_lib.learning.flow import FlowPredictor
 from skt_lib.learning.predictor import Skt, SktPredictor
@@ -114,25 +116,36 @@ class Kpam:
 class Proposals:
     """A proposing model (VAT-Mart, skt_flow): ``propose`` returns ``n`` SKTs drawn with
     ``rng`` (pass a fresh per-support generator: the proposals are then a function of the
-    support); ``predict`` the first of them (skt_flow's: the clearest by the cloud check).
-    ``clear``: each SKT then moved clear of the cloud
-    (:func:`~skt_lib.eval.clear_shift.shifted`; skt_flow's read-out). ``contacts``: skt_flow's
-    contact hypotheses (:class:`~skt_lib.eval.contact_hypotheses.ContactHypotheses`; None:
-    the model's own ``propose``, from the affordance's argmax)."""
+    support); ``predict`` the first of them. ``clear``: each SKT then moved clear of the
+    cloud (:func:`~skt_lib.eval.clear_shift.shifted`; skt_flow's read-out). ``contacts``:
+    skt_flow's contact hypotheses
+    (:class:`~skt_lib.eval.contact_hypotheses.ContactHypotheses`; None: the model's own
+    ``propose``, from the affordance's argmax). ``probes``: ``draws`` SKTs (at least ``n``)
+    are drawn and, moved or not, ordered by the training objects carried along them
+    (:func:`~skt_lib.eval.probe_check.order_by_probes`), and the first ``n`` proposed
+    (skt_flow's read-out); without probes ``draws`` is ``n``, in the model's order."""
 
     def __init__(self, predictor, rng: np.random.Generator, n: int, clear: bool = False,
-                 contacts: ContactHypotheses | None = None):
+                 contacts: ContactHypotheses | None = None, probes: ProbeSet | None = None,
+                 draws: int | None = None):
+        if draws is not None and draws < n:
+            raise ValueError(f"draws: need at least the {n} proposals, got {draws}")
         self.predictor, self.n, self.clear, self.contacts = predictor, n, clear, contacts
+        self.probes = probes
+        self.draws = n if probes is None or draws is None else draws
         self.state = rng.bit_generator.state
 
     def propose(self, cloud: np.ndarray) -> list[Skt]:
         rng = np.random.Generator(np.random.PCG64())
         rng.bit_generator.state = self.state  # the same draws on every call
         if self.contacts is None:
-            skts = self.predictor.propose(cloud, rng, self.n)
+            skts = self.predictor.propose(cloud, rng, self.draws)
         else:
-            skts = contact_hypotheses.propose(self.predictor, cloud, rng, self.n, self.contacts)
-        return [shifted(k, cloud) for k in skts] if self.clear else skts
+            skts = contact_hypotheses.propose(self.predictor, cloud, rng, self.draws,
+                                              self.contacts)
+        if self.clear:
+            skts = [shifted(k, cloud) for k in skts]
+        return skts if self.probes is None else ordered(skts, cloud, self.probes)[:self.n]
 
     def predict(self, cloud: np.ndarray) -> Skt:
         return self.propose(cloud)[0]
@@ -156,13 +169,16 @@ class OmniHang:
 
 def make_method(name: str, predictor, gt_positions: np.ndarray, pre_hang: np.ndarray,
                 lift: float = 0.0, rng: np.random.Generator | None = None, n_proposals: int = 1,
-                omnihang: tuple | None = None, flow_contacts: int = 1) -> Method:
+                omnihang: tuple | None = None, flow_contacts: int = 1,
+                probes: ProbeSet | None = None, flow_samples: int | None = None) -> Method:
     """The method ``name`` for one support (``gt_positions (T, 3)``, ξ_0 first).
 
     ``predictor``: the trained model of learned methods (:data:`MODEL_OF`); ``rng`` and
     ``n_proposals``: the proposers' latent draws; ``omnihang``: ``(object_points,
     OmniHangSettings, seed)``; ``flow_contacts``: skt_flow's contact hypotheses (1: the
-    affordance's argmax alone)."""
+    affordance's argmax alone); ``probes``: the training objects skt_flow's samples are
+    ordered by (:mod:`skt_lib.eval.probe_check`; None: the cloud check's order);
+    ``flow_samples``: how many it draws for them to order (default ``n_proposals``)."""
     if name in LEARNED or name in PROPOSING:
         if predictor is None:
             raise ValueError(f"{name}: needs the trained predictor")
@@ -171,7 +187,8 @@ def make_method(name: str, predictor, gt_positions: np.ndarray, pre_hang: np.nda
                 raise ValueError(f"{name}: needs a generator for its latents")
             if name == "skt_flow":
                 return Proposals(predictor, rng, n_proposals, clear=True,
-                                 contacts=ContactHypotheses(flow_contacts))
+                                 contacts=ContactHypotheses(flow_contacts), probes=probes,
+                                 draws=flow_samples)
             return Proposals(predictor, rng, n_proposals)
         return Learned(predictor, deform=name != "template_only")
     if name == "omnihang":
@@ -187,7 +204,7 @@ def make_method(name: str, predictor, gt_positions: np.ndarray, pre_hang: np.nda
 
 def method_for(name: str, support_id: str, gt_positions: np.ndarray | None, params,
                models: dict, omni_points: np.ndarray | None = None,
-               n_proposals: int | None = None) -> Method:
+               n_proposals: int | None = None, probes: ProbeSet | None = None) -> Method:
     """The method ``name`` for one support as ``sim_eval`` builds it: the proposers' latents
     and omnihang's planner seed from ``item_rng(common.seed, "sim_eval/<name>", support_id)``,
     so a support's SKTs are the same wherever they are made (``skt hang`` too).
@@ -196,7 +213,9 @@ def method_for(name: str, support_id: str, gt_positions: np.ndarray | None, para
     :data:`PRIVILEGED`); ``models``: :func:`load_models`'s; ``omni_points``: the reference
     object's surface samples (:func:`~skt_lib.eval.protocol.reference_points`; omnihang only);
     ``n_proposals``: the proposers' count (default ``sim_eval.n_proposals``; the first ``k``
-    proposals do not depend on it)."""
+    proposals do not depend on it, but skt_flow's ``probes`` order all of them);
+    ``probes``: skt_flow's (:func:`~skt_lib.eval.probe_check.load_probes` of the data
+    root)."""
     from skt_lib.eval.omnihang import OmniHangSettings
 
     if gt_positions is None and name in PRIVILEGED:
@@ -213,7 +232,8 @@ def method_for(name: str, support_id: str, gt_positions: np.ndarray | None, para
     return make_method(name, models.get(MODEL_OF.get(name)), gt_positions,
                        np.asarray(p.kpam_pre_hang_m, float), p.kpam_lift_m, rng=rng,
                        n_proposals=n_proposals or p.n_proposals, omnihang=omni,
-                       flow_contacts=p.flow_contacts)
+                       flow_contacts=p.flow_contacts, probes=probes,
+                       flow_samples=max(p.flow_samples, n_proposals or p.n_proposals))
 
 
 def model_dir(root: Path, method: str) -> Path:

@@ -46,15 +46,19 @@ def test_predict_ply_and_npy_give_the_models_skt(capsys, data_root, view, tmp_pa
     assert (tmp_path / "a.rrd").stat().st_size > 0
 
 
-def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, data_root, view,
-                                                                     tmp_path):
+def test_an_skt_flow_folder_gives_the_first_of_its_seeded_samples(capsys, data_root, view,
+                                                                   tmp_path):
     """A train_baselines/skt_flow folder as --model: the SKT is the first of the flow's N
-    samples (noise seeded with --seed) from sim_eval's contact hypotheses as the cloud check
-    orders them, moved clear of the cloud as sim_eval moves it; the JSON says so and carries
-    no family; another seed draws another SKT; --samples sets N."""
+    samples (noise seeded with --seed) from sim_eval's contact hypotheses, each moved clear of
+    the cloud as sim_eval moves it, in the order the training objects of the folder's data
+    root give them; the JSON says so and carries no family; another seed draws another SKT;
+    --samples sets N. The folder away from any data root orders by the cloud check."""
+    import shutil
+
     from skt_lib.cli.flow_readout import N_CONTACTS
     from skt_lib.eval.clear_shift import shifted
     from skt_lib.eval.contact_hypotheses import ContactHypotheses, propose
+    from skt_lib.eval.probe_check import load_probes, ordered
     from skt_lib.learning.flow import FlowPredictor
 
     np.save(tmp_path / "hook.npy", view)
@@ -70,7 +74,9 @@ def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, dat
     flow = FlowPredictor.load(model)
     cloud, counts, _ = prepare_cloud(view, flow.cfg.n_points)
     h = ContactHypotheses(N_CONTACTS)
-    want = [shifted(w, cloud) for w in propose(flow, cloud, np.random.default_rng(0), 10, h)]
+    drawn = [shifted(w, cloud) for w in propose(flow, cloud, np.random.default_rng(0), 30, h)]
+    want = ordered(drawn, cloud, load_probes(data_root))
+    assert [w.positions[0, 0] for w in want] != [w.positions[0, 0] for w in drawn]  # reordered
     pos = np.array([w["position"] for w in a["waypoints"]])
     np.testing.assert_allclose(pos, want[0].positions, atol=1e-12)
     # the tiny model's samples lie close together, but not within the tolerance above: the
@@ -79,16 +85,22 @@ def test_an_skt_flow_folder_gives_the_clearest_of_its_seeded_samples(capsys, dat
     assert a["model_kind"] == "skt_flow" and a["family"] is None
     assert a["confidence"]["family_probability"] is None
     assert a["contact_point"] == want[0].contact.tolist() and a["cleaning"] == counts
-    assert "clearest of 10 skt_flow samples" in out
+    assert "first of 30 skt_flow samples" in out and "by the training objects" in out
     assert (tmp_path / "a.rrd").stat().st_size > 0
     b, _ = run("b", "--seed", "0")
     assert b["waypoints"] == a["waypoints"]  # the same seed: the same SKT
     c, _ = run("c", "--samples", "3")
-    want3 = propose(flow, cloud, np.random.default_rng(0), 3, h)
-    np.testing.assert_allclose([w["position"] for w in c["waypoints"]],
-                               shifted(want3[0], cloud).positions, atol=1e-12)
+    want3 = ordered([shifted(w, cloud) for w in propose(flow, cloud, np.random.default_rng(0),
+                                                         3, h)], cloud, load_probes(data_root))
+    np.testing.assert_allclose([w["position"] for w in c["waypoints"]], want3[0].positions,
+                               atol=1e-12)
     d, _ = run("d", "--seed", "1")
     assert d["waypoints"] != a["waypoints"]
+    model = shutil.copytree(model, tmp_path / "models" / "alone" / "skt_flow")
+    e, out = run("e")  # no training objects two folders up: the cloud check's order
+    np.testing.assert_allclose([w["position"] for w in e["waypoints"]], drawn[0].positions,
+                               atol=1e-12)
+    assert "by the cloud check (no training objects beside the model)" in out
 
 
 def test_samples_goes_with_an_skt_flow_model(capsys, data_root, view, tmp_path):
@@ -270,7 +282,7 @@ def test_camera_mode_warns_where_the_frame_may_be_centimetres_off(capsys, data_r
 
 
 def test_the_cli_draws_its_skt_as_table_is_skt_flow_row_does():
-    """``skt predict``'s defaults are the committed params' ``sim_eval.n_proposals`` and
+    """``skt predict``'s defaults are the committed params' ``sim_eval.flow_samples`` and
     ``sim_eval.flow_contacts``: the CLI's SKT comes from the same read-out as Table I's."""
     from pathlib import Path
 
@@ -278,4 +290,4 @@ def test_the_cli_draws_its_skt_as_table_is_skt_flow_row_does():
     from skt_lib.config.params_file import load_params
 
     p = load_params(Path(__file__).parents[2] / "params.yaml").sim_eval
-    assert (N_SAMPLES, N_CONTACTS) == (p.n_proposals, p.flow_contacts)
+    assert (N_SAMPLES, N_CONTACTS) == (p.flow_samples, p.flow_contacts)

@@ -66,18 +66,21 @@ def test_first_and_best_of_n_are_val_sims_rows_pair_for_pair(tiny_evaluated, tmp
     assert val_sim.main(["--params", str(params), "--data-root", str(data), "--methods",
                          "skt_flow", "--out", str(rows)]) == 0
     got, ref = json.loads(every.read_text()), json.loads(rows.read_text())
-    assert got["moved_clear"] is True and got["n_proposals"] == 3
+    # every one of skt_flow's flow_samples samples, in its read-out's order: val_sim's
+    # proposals are the first n_proposals of them
+    assert got["moved_clear"] is True and got["n_proposals"] == 5 and ref["skt_flow_samples"] == 5
     assert set(got["outcomes"]) == set(ref["outcomes"]["skt_flow"]) and got["outcomes"]
-    assert all(len(v) == 3 for v in got["outcomes"].values())
+    assert all(len(v) == 5 for v in got["outcomes"].values())
     assert {k: v[0] for k, v in got["outcomes"].items()} == ref["outcomes"]["skt_flow@1"]
-    assert {k: any(v) for k, v in got["outcomes"].items()} == ref["outcomes"]["skt_flow"]
+    assert {k: any(v[:3]) for k, v in got["outcomes"].items()} == ref["outcomes"]["skt_flow"]
     assert got["rules"]["first"]["success"] == ref["methods"]["skt_flow@1"]["success"]
-    assert got["rules"]["best_of_n"]["success"] == ref["methods"]["skt_flow"]["success"]
-    assert set(got["picks"]) == {"first", "least_penetration", "least_moved", "medoid"}
+    assert set(got["picks"]) == {"first", "least_penetration", "least_moved", "medoid",
+                                 "cloud_check", "probes_held_out"}
     # the tiny set's objects hang or fail with their support whichever SKT runs, so the SKTs
     # themselves are compared: val_sim's draws of skt_flow (its generator), each moved clear
     from skt_lib.config.params_file import load_params
     from skt_lib.eval.methods import load_models, make_method
+    from skt_lib.eval.probe_check import load_probes
     from skt_lib.learning.cloud_check import ring_penetrations
     from skt_lib.seeding import item_rng
 
@@ -85,10 +88,10 @@ def test_first_and_best_of_n_are_val_sims_rows_pair_for_pair(tiny_evaluated, tmp
     p, T, seed = prm.sim_eval, prm.clustering.T, prm.common.seed
     assert p.flow_contacts > 1  # sim_eval's contact hypotheses, which val_every must follow
     supports, _, _ = val_sim.validation_set(data, T, seed, p)
-    model = load_models(data, ["skt_flow"], T)["skt_flow"]
+    model, probes = load_models(data, ["skt_flow"], T)["skt_flow"], load_probes(data)
     for s in supports:
         made = make_method("skt_flow", model, s.gt, np.asarray(p.kpam_pre_hang_m), p.kpam_lift_m,
-                           rng=item_rng(seed, "val_sim/skt_flow", s.support_id), n_proposals=3,
-                           flow_contacts=p.flow_contacts)
+                           rng=item_rng(seed, "val_sim/skt_flow", s.support_id), n_proposals=5,
+                           flow_contacts=p.flow_contacts, probes=probes, flow_samples=5)
         pen = ring_penetrations([k.positions for k in made.propose(s.cloud)], s.cloud) * 1e6
         assert got["penetration_mm2"][s.support_id] == pytest.approx(pen.tolist(), abs=1e-9)

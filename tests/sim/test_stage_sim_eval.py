@@ -83,7 +83,7 @@ def test_metrics_contract_matches_the_trials_table(evaluated):
     text = (rep / "report.md").read_text()
     assert "Table I" in text and "success.png" in text and (rep / "success.png").exists()
     assert "Table II" in text and "first proposal only" in text
-    assert "skt_flow, one SKT (the cloud check's pick of its samples)" in text
+    assert "skt_flow, one SKT (the training objects' pick of its samples)" in text
     assert "Multimodality: ground-truth SKTs reached" in text
     # the orderings the paper reports are checked wherever both methods ran
     claims = {c["claim"] for c in metrics["paper_orderings"]}
