@@ -84,14 +84,17 @@ def test_the_oracles_run_on_validation_and_the_robot_base_moves_the_panda(tiny_e
 
 
 def test_no_clear_runs_skt_flows_samples_as_drawn(tiny_evaluated, monkeypatch):
-    """--no-clear hands the trials the flow's samples unmoved; by default they are moved clear
-    of the cloud (skt_lib.eval.clear_shift), as sim_eval runs them, and drawn from
-    sim_eval.flow_contacts contact hypotheses; --flow-contacts 1: from the argmax alone."""
+    """By default the trials get sim_eval's read-out: sim_eval.flow_samples samples drawn
+    from sim_eval.flow_contacts contact hypotheses, moved clear of the cloud
+    (skt_lib.eval.clear_shift), ordered by the training objects (skt_lib.eval.probe_check),
+    the first n_proposals. --no-probes: n_proposals samples in the cloud check's order;
+    with --no-clear unmoved; --flow-contacts 1: from the argmax alone."""
     import numpy as np
 
     import tools.val_sim as val_sim
     from skt_lib.eval.clear_shift import shifted
     from skt_lib.eval.contact_hypotheses import ContactHypotheses, propose
+    from skt_lib.eval.probe_check import load_probes, ordered
     from skt_lib.eval.protocol import load_test_set
     from skt_lib.config.params_file import load_params
     from skt_lib.learning.flow import FlowPredictor
@@ -109,7 +112,8 @@ def test_no_clear_runs_skt_flows_samples_as_drawn(tiny_evaluated, monkeypatch):
 
     monkeypatch.setattr(val_sim, "run_rounds", capture)
     got = {}
-    for flag in ([], ["--no-clear"], ["--flow-contacts", "1"]):
+    for flag in ([], ["--no-probes"], ["--no-probes", "--no-clear"],
+                 ["--no-probes", "--flow-contacts", "1"]):
         with pytest.raises(Stop):
             main(["--params", str(params_path), "--data-root", str(data), "--methods", "skt_flow",
                   *flag])
@@ -121,7 +125,9 @@ def test_no_clear_runs_skt_flows_samples_as_drawn(tiny_evaluated, monkeypatch):
                                    support_split="val", object_split="train",
                                    grasp_sphere=p.grasp_sphere_directions)
     flow = FlowPredictor.load(data / "train_baselines" / "skt_flow")
-    differs = []
+    probes = load_probes(data)
+    assert p.flow_samples > p.n_proposals
+    differs, reordered = [], []
     for s in supports:
         rng = item_rng(params.common.seed, "val_sim/skt_flow", s.support_id)
         state = rng.bit_generator.state
@@ -129,12 +135,23 @@ def test_no_clear_runs_skt_flows_samples_as_drawn(tiny_evaluated, monkeypatch):
         rng.bit_generator.state = state
         own = flow.propose(s.cloud, rng, p.n_proposals)
         key = ("skt_flow", s.support_id)
-        drawn, moved, argmax = got["--no-clear"][key], got[""][key], got["--flow-contacts 1"][key]
+        drawn, moved = got["--no-probes --no-clear"][key], got["--no-probes"][key]
+        argmax = got["--no-probes --flow-contacts 1"][key]
+        # the read-out: flow_samples samples, moved, ordered by the training objects, the
+        # first n_proposals run
+        rng.bit_generator.state = state
+        all_moved = [shifted(k, s.cloud) for k in propose(
+            flow, s.cloud, rng, p.flow_samples, ContactHypotheses(p.flow_contacts))]
+        first = ordered(all_moved, s.cloud, probes)[:p.n_proposals]
+        assert len(got[""][key]) == p.n_proposals
+        assert all(np.array_equal(a, k.positions) for a, k in zip(got[""][key], first))
+        reordered.append(not np.array_equal(first[0].positions, all_moved[0].positions))
         assert all(np.array_equal(a, k.positions) for a, k in zip(drawn, raw))
         assert all(np.array_equal(a, shifted(k, s.cloud).positions) for a, k in zip(moved, raw))
         assert all(np.array_equal(a, shifted(k, s.cloud).positions) for a, k in zip(argmax, own))
         differs.append(not all(np.array_equal(a, b) for a, b in zip(moved, argmax)))
     assert any(differs)  # the hypotheses are not the argmax's samples again
+    assert any(reordered)  # the training objects change the cloud check's order
 
 
 @pytest.mark.parametrize("found", [([], ["object"], []), (["support"], [], [])])
