@@ -147,7 +147,8 @@ def _probes_beside(model_dir: Path):
     as :mod:`skt_lib.eval.probe_check`'s probes; None where that root does not hold them."""
     from skt_lib.eval.probe_check import load_probes
 
-    root = model_dir.resolve().parents[1] if len(model_dir.resolve().parents) > 1 else None
+    parents = model_dir.resolve().parents
+    root = parents[1] if len(parents) > 1 else None
     if root is None or not all((root / f).is_file() for f in (
             "mesh_gen/objects.parquet", "rotation_extraction/keypoints.parquet")):
         return None
