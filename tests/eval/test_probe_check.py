@@ -120,15 +120,41 @@ def test_a_probe_set_refuses_what_it_cannot_carry():
         ProbeSet((), ())
 
 
-def test_the_cell_filter_passes_every_point_within_depth_of_the_cloud():
+def test_the_cell_grid_passes_every_point_within_depth_of_a_probe_and_little_more():
+    """The filter is exact (no point within DEPTH_M of a probe point is dropped, for that
+    probe's bit) and tight (what it passes lies within DEPTH_M plus a cell's diagonal)."""
     from scipy.spatial import cKDTree
 
-    from skt_lib.eval.probe_check import _NearCells
+    from skt_lib.eval.probe_check import CELL_M
 
     rng = np.random.default_rng(3)
-    cloud = rng.uniform(0.0, 0.03, (400, 3))
-    query = rng.uniform(-0.01, 0.04, (20000, 3))
-    d, _ = cKDTree(cloud).query(query)
-    passed = _NearCells(cloud)(query)
-    assert passed[d < DEPTH_M].all() and (d < DEPTH_M).sum() > 100
-    assert passed.mean() < 0.9 and not passed[d > 2 * np.sqrt(3) * DEPTH_M].any()
+    points = (rng.uniform(0.0, 0.03, (150, 3)), rng.uniform(0.02, 0.05, (150, 3)))
+    grid = ProbeSet(("a", "b"), points).cells[0]
+    query = rng.uniform(-0.01, 0.06, (40000, 3))
+    # the identity pose: the query points are already in the keypoint frame
+    pose, point, bits = grid.near(query, np.eye(3)[None], np.zeros((1, 3)))
+    assert (pose == 0).all()
+    for bit, own in enumerate(points):
+        d, _ = cKDTree(own).query(query)
+        passed = np.zeros(len(query), bool)
+        passed[point[(bits >> bit) & 1 == 1]] = True
+        assert passed[d < DEPTH_M].all() and (d < DEPTH_M).sum() > 200
+        assert not passed[d > DEPTH_M + np.sqrt(3) * CELL_M + 1e-9].any()
+        # about 2.6 x the balls' volume passes, not the 27 cells' 6.4 x
+        assert passed.sum() < 3.5 * (d < DEPTH_M).sum()
+
+
+def test_more_probes_than_one_grid_holds_are_each_measured():
+    """70 probes: two cell grids (64 bits and 6); every probe's sum is its own, checked
+    against every distance."""
+    rng = np.random.default_rng(4)
+    cloud = np.c_[rng.uniform(0.0, 0.16, 200), rng.uniform(-0.012, 0.012, 200),
+                  np.full(200, 0.1)]
+    shapes = [rng.uniform(-0.01, 0.01, (12, 3)) * rng.uniform(0.3, 1.5) for _ in range(70)]
+    probes = ProbeSet(tuple(f"p{i}" for i in range(70)), tuple(shapes))
+    assert [len(g.probes) for g in probes.cells] == [64, 6]
+    cand = _approach(0.0)
+    pen = probe_penetrations([cand, _approach(0.5)], cloud, probes)
+    want = np.array([_brute(cand, cloud, local) for local in shapes])
+    assert pen[0] == pytest.approx(want, rel=1e-9, abs=1e-18) and (want > 0).sum() > 30
+    assert not pen[1].any()
