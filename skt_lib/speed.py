@@ -39,9 +39,13 @@ def render_bench(params, root: Path, per_level: int, tmp: Path) -> dict:
             "render_total_ms_per_view_median": float(np.median(total_ms))}
 
 
-def _median_ms(root: Path, predict, n: int = 100, warmup: int = 10) -> float:
+#: Views ``_median_ms`` times, after the untimed warm-up ones.
+N_TIMED, N_WARMUP = 100, 10
+
+
+def _median_ms(root: Path, predict, n: int = N_TIMED, warmup: int = N_WARMUP) -> float:
     """Median wall time (ms) of ``predict(cloud)`` over ``n`` different rendered views after
-    ``warmup`` untimed ones, one process."""
+    ``warmup`` untimed ones (the first ``warmup`` of the same views), one process."""
     clouds = [read_npz(f, RENDER_SPEC)["points"] for f in sorted((root / "render_views").glob("*.npz"))[:5]]
     views = [c[v] for c in clouds for v in range(0, c.shape[0], 2)][:n]
     for cloud in views[:warmup]:
@@ -60,20 +64,35 @@ def sctdn_bench(root: Path) -> dict:
     return {"sctdn_inference_ms_median": _median_ms(root, predictor.predict)}
 
 
+#: skt_flow's read-out steps, timed apart by :func:`flow_bench`.
+FLOW_STEPS = ("sample", "clear", "order")
+
+
 def flow_bench(root: Path, n_samples: int, seed: int, n_contacts: int) -> dict:
     """skt_flow inference, batch 1: N points in → ``n_samples`` samples from ``n_contacts``
     contact hypotheses, each moved clear of the points, ordered by the training objects
     carried along them (the first: the one SKT its single-SKT row runs), model and probes
-    loaded."""
+    loaded; and each of the three steps' median apart (:data:`FLOW_STEPS`)."""
     predictor = FlowPredictor.load(root / "train_baselines" / "skt_flow")
     probes = load_probes(root)
     rng, h = np.random.default_rng(seed), ContactHypotheses(n_contacts)
+    steps = {k: [] for k in FLOW_STEPS}
 
     def predict(cloud):
-        skts = [shifted(k, cloud) for k in propose(predictor, cloud, rng, n_samples, h)]
-        return ordered(skts, cloud, probes)[0]
+        t0 = time.perf_counter()
+        skts = propose(predictor, cloud, rng, n_samples, h)
+        t1 = time.perf_counter()
+        skts = [shifted(k, cloud) for k in skts]
+        t2 = time.perf_counter()
+        first = ordered(skts, cloud, probes)[0]
+        for k, a, b in zip(FLOW_STEPS, (t0, t1, t2), (t1, t2, time.perf_counter())):
+            steps[k].append(1000 * (b - a))
+        return first
 
-    return {"skt_flow_inference_ms_median": _median_ms(root, predict)}
+    out = {"skt_flow_inference_ms_median": _median_ms(root, predict)}
+    for k, ms in steps.items():  # the timed views only: the warm-up ones came first
+        out[f"skt_flow_{k}_ms_median"] = float(np.median(ms[N_WARMUP:]))
+    return out
 
 
 #: The methods whose SKTs the executor bench runs: the ground truth (mostly hung) and the

@@ -59,6 +59,12 @@ BENCH_ROWS = {
                                                   "training objects carried along them (the "
                                                   "first: the SKT it runs), model loaded; "
                                                   "median of 100 after 10 warm-up"),
+    "skt_flow_sample_ms_median": ("{:.1f} ms", "of which drawing the samples (the network, "
+                                               "three contacts, the cloud check's order)"),
+    "skt_flow_clear_ms_median": ("{:.1f} ms", "of which moving each clear of the points "
+                                              "(`skt_lib/eval/clear_shift.py`)"),
+    "skt_flow_order_ms_median": ("{:.1f} ms", "of which ordering them by the training objects "
+                                              "(`skt_lib/eval/probe_check.py`)"),
     "cli_predict_ms_median": ("{:.0f} ms", "`skt predict`'s prediction of a 1000-point view: "
                                            "cleaning, sampling, skt_flow (the default "
                                            "model); model loaded, process start excluded; "
