@@ -14,9 +14,8 @@ Runs on the artifacts of ``make repro`` with the committed params and writes
   NPZ write share), over the same sample of supports, one process;
 - ``sctdn_inference_ms_median``: SCTDN, batch 1, points in → SKT out, model loaded;
 - ``skt_flow_inference_ms_median``: skt_flow, batch 1, points in → ``sim_eval.flow_samples``
-  samples, each moved clear of the points, ordered by the training objects carried along
-  them (the first: the SKT it executes), model and probes loaded; ``skt_flow_<step>_ms_median``
-  each of those three steps apart (``sample``, ``clear``, ``order``);
+  samples moved clear of the points, ordered by the training objects (the first: the SKT it
+  executes), models loaded; ``skt_flow_{sample,clear,order}_ms_median``: each step apart;
 - ``cli_predict_ms_median``: ``skt predict``'s prediction of a 1000-point view with its
   default model (cleaning, sampling, skt_flow's 30 samples, the move and the probes' order),
   model loaded, process start excluded;
